@@ -1,0 +1,90 @@
+"""The terrain curriculum as device arrays: every robot keeps its own family, level and tile.
+
+The rule (paper; thresholds from the authors' code): when a robot's episode ends it moves up one
+level if it ended within `up_distance` of the goal (planar) and within `up_yaw` of the goal's
+heading, otherwise down one level. A robot that clears the top level is sent to a random level.
+Pure jnp functions on per-robot scalars, vmapped by the env with the robots.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class CurriculumConfig:
+    """Curriculum settings."""
+
+    enabled: bool = True  # update levels at episode ends (off in evaluation)
+    up_distance: float = 0.8  # planar distance to goal (m) under which a robot moves up
+    up_yaw: float = 0.4  # heading error (rad) under which a robot moves up
+    initial_max_level: int = 1  # robots start uniformly in levels [0, initial_max_level]
+    random_on_top: bool = True  # a robot that clears the top level goes to a random level
+
+
+class TileTable:
+    """Per-family column tables of an atlas, as device arrays.
+
+    `columns[f, k]` is the k-th atlas column holding family f (padded with its first column);
+    `num_columns[f]` how many there are.
+    """
+
+    def __init__(self, family: np.ndarray, cols: int, num_families: int):
+        family_of_col = np.asarray(family)[:cols]
+        table = np.zeros((num_families, cols), np.int32)
+        counts = np.zeros(num_families, np.int32)
+        for c, f in enumerate(family_of_col):
+            table[f, counts[f]] = c
+            counts[f] += 1
+        if np.any(counts == 0):
+            missing = [int(f) for f in np.nonzero(counts == 0)[0]]
+            raise ValueError(f"atlas has no column for family index {missing}")
+        for f in range(num_families):
+            table[f, counts[f] :] = table[f, 0]
+        self.columns = jnp.asarray(table)
+        self.num_columns = jnp.asarray(counts)
+        self.cols = cols
+
+
+def next_level(
+    level: jnp.ndarray,
+    moved_up: jnp.ndarray,
+    num_levels: int,
+    rng: jax.Array,
+    config: CurriculumConfig,
+) -> jnp.ndarray:
+    """The level after an episode ends. Scalars (vmapped over robots).
+
+    Args:
+      level: [] int32 current level, 0-based.
+      moved_up: [] bool, the robot ended close enough to the goal.
+      num_levels: number of levels (static).
+      rng: key for the random level of robots that clear the top.
+    """
+    up = jnp.minimum(level + 1, num_levels - 1)
+    down = jnp.maximum(level - 1, 0)
+    new = jnp.where(moved_up, up, down)
+    if config.random_on_top:
+        cleared_top = moved_up & (level == num_levels - 1)
+        new = jnp.where(cleared_top, jax.random.randint(rng, (), 0, num_levels), new)
+    return new.astype(jnp.int32)
+
+
+def reached(
+    planar_distance: jnp.ndarray, yaw_error: jnp.ndarray, config: CurriculumConfig
+) -> jnp.ndarray:
+    """[] bool: the robot ended within the up thresholds of the goal."""
+    return (planar_distance < config.up_distance) & (jnp.abs(yaw_error) < config.up_yaw)
+
+
+def pick_tile(
+    level: jnp.ndarray, family: jnp.ndarray, table: TileTable, rng: jax.Array
+) -> jnp.ndarray:
+    """[] int32 atlas tile index for a robot of `family` at `level`: a random column of its family."""
+    k = jax.random.randint(rng, (), 0, table.num_columns[family])
+    col = table.columns[family, k]
+    return (level * table.cols + col).astype(jnp.int32)
