@@ -84,7 +84,7 @@ def reached(
 def pick_tile(
     level: jnp.ndarray, family: jnp.ndarray, table: TileTable, rng: jax.Array
 ) -> jnp.ndarray:
-    """[] int32 atlas tile index for a robot of `family` at `level`: a random column of its family."""
+    """[] int32 atlas tile of a robot of `family` at `level`: a random column of its family."""
     k = jax.random.randint(rng, (), 0, table.num_columns[family])
     col = table.columns[family, k]
     return (level * table.cols + col).astype(jnp.int32)

@@ -105,7 +105,7 @@ class EnvConfig:
 
 
 def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) -> EnvConfig:
-    """The same env for evaluation: no noise, no randomisation, no trunk termination, fixed levels."""
+    """The same env for evaluation: no noise, no randomisation, no trunk ending, no curriculum."""
     return dataclasses.replace(
         config,
         noise=dataclasses.replace(config.noise, enabled=False),
@@ -360,7 +360,7 @@ class StairEnv(Env):
     # ------------------------------------------------------------------ step
 
     def step(self, state: State, action: jnp.ndarray) -> State:
-        """One policy step: PD over `decimation` physics steps, rewards, terminations, auto-reset."""
+        """One policy step: PD over `decimation` physics steps, rewards, endings, auto-reset."""
         c = self.config
         info = dict(state.info)
         action = jnp.clip(action, -c.action_clip, c.action_clip)
