@@ -1,0 +1,54 @@
+# mjx_stairs. Every target sets itself up: a missing virtualenv is created and the package
+# installed into it first. On a machine with an NVIDIA GPU the CUDA build of JAX is installed.
+#   make exp1            the main job: stage 1, stage 2, the stall ablation, evaluation, figures
+#   make test            the CPU test suite (what CI runs)
+# Override PY to use an existing interpreter instead of the virtualenv, e.g. on a GPU host with
+# the wheelhouse on PYTHONPATH:  make train-stage1 PY=python3 SETUP=
+
+VENV ?= .venv
+PY ?= $(VENV)/bin/python
+SETUP ?= $(VENV)/.installed
+HAS_GPU := $(shell command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1 && echo 1)
+comma := ,
+EXTRAS := dev$(if $(HAS_GPU),$(comma)cuda)
+ARGS ?=
+
+.PHONY: setup test lint train-stage1 train-stage2 ablation eval exp1 transfer-matrix bench clean-venv
+
+$(VENV)/.installed: pyproject.toml
+	python3 -m venv $(VENV)
+	$(VENV)/bin/pip install -q --upgrade pip
+	$(VENV)/bin/pip install -q -e ".[$(EXTRAS)]"
+	touch $@
+
+setup: $(SETUP)
+
+test: $(SETUP)
+	JAX_PLATFORMS=cpu $(PY) -m pytest tests -q
+
+lint: $(SETUP)
+	$(PY) -m ruff check mjx_stairs terrains tests
+
+train-stage1: $(SETUP)
+	$(PY) -m mjx_stairs train experiments/stage1.toml $(ARGS)
+
+train-stage2: $(SETUP)
+	$(PY) -m mjx_stairs train experiments/stage2_u.toml $(ARGS)
+
+ablation: $(SETUP)
+	$(PY) -m mjx_stairs train experiments/stage2_u_no_stall.toml $(ARGS)
+
+eval: $(SETUP)
+	$(PY) -m mjx_stairs eval $(ARGS)
+
+exp1: $(SETUP)
+	$(PY) -m mjx_stairs exp1 $(ARGS)
+
+transfer-matrix: $(SETUP)
+	@echo "transfer-matrix: not built yet (the transfer experiment has no issue landed)"; exit 2
+
+bench: $(SETUP)
+	$(PY) -m mjx_stairs bench $(ARGS)
+
+clean-venv:
+	rm -rf $(VENV)
