@@ -1,0 +1,273 @@
+"""Actor-critic networks as plain functions on a params pytree (no flax).
+
+Observation layout (both the actor's "state" and the critic's "privileged_state" stream):
+``[vec (n_vec floats) | height map (map_h * map_w floats, row-major)]``. With ``map_shape == ()``
+there is no map: the encoder is skipped and the MLPs see the whole vector.
+
+Params pytree (dicts and lists of float32 arrays; C = conv_channels, P = pool_size,
+L = latent_size, F = L + n_vec with a map, n_vec without):
+
+```
+{
+  "encoder": {                                   # absent when map_shape == ()
+    "conv": [{"w": [3, 3, 1, C0], "b": [C0]},    # conv3x3 SAME -> ELU -> maxpool 2
+             {"w": [3, 3, C0, C1], "b": [C1]},   # conv3x3 SAME -> ELU -> maxpool 2
+             {"w": [3, 3, C1, C2], "b": [C2]}],  # conv3x3 SAME -> ELU -> adaptive avg pool PxP
+    "proj": {"w": [P * P * C2, L], "b": [L]},     # linear -> ELU = latent
+  },
+  "actor":  [{"w": [F, 128], "b": [128]}, {"w": [128, 128], ...}, {"w": [128, 64], ...},
+             {"w": [64, A], "b": [A]}],          # ELU between layers, linear output = mean
+  "critic": [... same hidden sizes ..., {"w": [64, 1], "b": [1]}],
+  "log_std": [A],                                # state-independent, init log(init_std)
+}
+```
+
+The encoder is shared: the actor encodes the actor stream, the critic encodes the privileged
+stream with the same encoder weights, and both losses train it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+Params = dict[str, Any]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Sizes and initialisation of the CNN-MLP actor-critic."""
+
+    conv_channels: tuple[int, ...] = field(
+        default=(8, 16, 32), metadata={"help": "output channels of the 3x3 conv layers"}
+    )
+    pool_size: int = field(
+        default=2, metadata={"help": "adaptive average pool output (pool_size x pool_size)"}
+    )
+    latent_size: int = field(default=128, metadata={"help": "size of the map latent"})
+    actor_hidden: tuple[int, ...] = field(
+        default=(128, 128, 64), metadata={"help": "actor MLP hidden sizes"}
+    )
+    critic_hidden: tuple[int, ...] = field(
+        default=(128, 128, 64), metadata={"help": "critic MLP hidden sizes"}
+    )
+    init_std: float = field(default=0.8, metadata={"help": "initial policy std (all actions)"})
+    init: str = field(
+        default="orthogonal",
+        metadata={"help": "weight init: 'orthogonal' (gain sqrt2, 0.01 actor out, 1 critic out) "
+                  "or 'lecun' (scaled normal)"},
+    )
+    normalize_obs: bool = field(
+        default=True, metadata={"help": "running mean/std normalisation of both obs streams"}
+    )
+    obs_clip: float = field(
+        default=10.0, metadata={"help": "clip normalised observations to +-obs_clip (0 = off)"}
+    )
+
+
+@dataclass(frozen=True)
+class ObsLayout:
+    """Static layout of one observation vector: [vec (n_vec) | map (prod(map_shape))]."""
+
+    n_vec: int
+    map_shape: tuple[int, ...] = ()
+
+    @property
+    def map_size(self) -> int:
+        return math.prod(self.map_shape) if self.map_shape else 0
+
+    @property
+    def obs_size(self) -> int:
+        return self.n_vec + self.map_size
+
+
+# ----------------------------------------------------------------------------- init
+
+
+def _dense_init(rng: jax.Array, n_in: int, n_out: int, gain: float, kind: str) -> Params:
+    if kind == "orthogonal":
+        w = jax.nn.initializers.orthogonal(scale=gain)(rng, (n_in, n_out), jnp.float32)
+    elif kind == "lecun":
+        w = gain * jax.random.normal(rng, (n_in, n_out), jnp.float32) / math.sqrt(n_in)
+    else:
+        raise ValueError(f"network.init: unknown init '{kind}' (expected 'orthogonal' or 'lecun')")
+    return {"w": w, "b": jnp.zeros((n_out,), jnp.float32)}
+
+
+def _conv_init(rng: jax.Array, c_in: int, c_out: int, gain: float, kind: str) -> Params:
+    fan_in = 9 * c_in
+    flat = _dense_init(rng, fan_in, c_out, gain, kind)
+    return {"w": flat["w"].reshape(3, 3, c_in, c_out), "b": flat["b"]}
+
+
+def _mlp_init(rng, sizes: list[int], out_gain: float, kind: str) -> list[Params]:
+    keys = jax.random.split(rng, len(sizes) - 1)
+    layers = []
+    for i, (k, n_in, n_out) in enumerate(zip(keys, sizes[:-1], sizes[1:], strict=True)):
+        last = i == len(sizes) - 2
+        layers.append(_dense_init(k, n_in, n_out, out_gain if last else math.sqrt(2.0), kind))
+    return layers
+
+
+def _pooled_shape(map_shape: tuple[int, ...], n_conv: int) -> tuple[int, int]:
+    h, w = map_shape
+    for _ in range(n_conv - 1):
+        h, w = h // 2, w // 2
+    return h, w
+
+
+def init_params(
+    rng: jax.Array,
+    cfg: NetworkConfig,
+    n_vec: int,
+    map_shape: tuple[int, ...],
+    action_size: int,
+) -> Params:
+    """Fresh actor-critic params; shapes in the module docstring."""
+    map_shape = tuple(map_shape)
+    k_enc, k_proj, k_actor, k_critic = jax.random.split(rng, 4)
+    params: Params = {}
+    if map_shape:
+        if len(map_shape) != 2:
+            raise ValueError(f"map_shape must be () or (h, w), got {map_shape}")
+        h, w = _pooled_shape(map_shape, len(cfg.conv_channels))
+        if h < 1 or w < 1:
+            raise ValueError(f"map {map_shape} too small for {len(cfg.conv_channels)} conv layers")
+        chans = (1, *cfg.conv_channels)
+        conv_keys = jax.random.split(k_enc, len(cfg.conv_channels))
+        conv = [
+            _conv_init(k, c_in, c_out, math.sqrt(2.0), cfg.init)
+            for k, c_in, c_out in zip(conv_keys, chans[:-1], chans[1:], strict=True)
+        ]
+        n_flat = cfg.pool_size * cfg.pool_size * chans[-1]
+        proj = _dense_init(k_proj, n_flat, cfg.latent_size, math.sqrt(2.0), cfg.init)
+        params["encoder"] = {"conv": conv, "proj": proj}
+        n_feat = cfg.latent_size + n_vec
+    else:
+        n_feat = n_vec
+    params["actor"] = _mlp_init(k_actor, [n_feat, *cfg.actor_hidden, action_size], 0.01, cfg.init)
+    params["critic"] = _mlp_init(k_critic, [n_feat, *cfg.critic_hidden, 1], 1.0, cfg.init)
+    params["log_std"] = jnp.full((action_size,), math.log(cfg.init_std), jnp.float32)
+    return params
+
+
+# ----------------------------------------------------------------------------- layers
+
+
+def _conv3x3(x: jax.Array, p: Params) -> jax.Array:
+    """[N, H, W, Cin] -> [N, H, W, Cout], SAME padding, NHWC."""
+    y = jax.lax.conv_general_dilated(
+        x, p["w"], window_strides=(1, 1), padding="SAME",
+        dimension_numbers=("NHWC", "HWIO", "NHWC"),
+    )
+    return y + p["b"]
+
+
+def _maxpool2(x: jax.Array) -> jax.Array:
+    """[N, H, W, C] -> [N, H // 2, W // 2, C] (floor, like torch MaxPool2d(2))."""
+    return jax.lax.reduce_window(x, -jnp.inf, jax.lax.max, (1, 2, 2, 1), (1, 2, 2, 1), "VALID")
+
+
+def _adaptive_avg_pool(x: jax.Array, out_hw: tuple[int, int]) -> jax.Array:
+    """[N, H, W, C] -> [N, oh, ow, C] with torch AdaptiveAvgPool2d bins (may overlap)."""
+    _, h, w, _ = x.shape
+    oh, ow = out_hw
+    rows = []
+    for i in range(oh):
+        r0, r1 = (i * h) // oh, -((-(i + 1) * h) // oh)
+        cols = []
+        for j in range(ow):
+            c0, c1 = (j * w) // ow, -((-(j + 1) * w) // ow)
+            cols.append(jnp.mean(x[:, r0:r1, c0:c1, :], axis=(1, 2)))
+        rows.append(jnp.stack(cols, axis=1))
+    return jnp.stack(rows, axis=1)
+
+
+def _mlp(layers: list[Params], x: jax.Array) -> jax.Array:
+    for p in layers[:-1]:
+        x = jax.nn.elu(x @ p["w"] + p["b"])
+    return x @ layers[-1]["w"] + layers[-1]["b"]
+
+
+# ----------------------------------------------------------------------------- model
+
+
+def encode(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
+    """Features for the MLPs: [..., D] -> [..., latent_size + n_vec] (latent || vec).
+
+    Without a map (``layout.map_shape == ()``) the obs is returned unchanged.
+    """
+    if not layout.map_shape:
+        return obs
+    if obs.shape[-1] != layout.obs_size:
+        raise ValueError(f"obs has {obs.shape[-1]} floats, layout expects {layout.obs_size}")
+    enc = params["encoder"]
+    lead = obs.shape[:-1]
+    vec = obs[..., : layout.n_vec]
+    x = obs[..., layout.n_vec :].reshape(-1, *layout.map_shape, 1)
+    n_conv = len(enc["conv"])
+    for i, p in enumerate(enc["conv"]):
+        x = jax.nn.elu(_conv3x3(x, p))
+        if i < n_conv - 1:
+            x = _maxpool2(x)
+    n_flat = enc["proj"]["w"].shape[0]
+    c = x.shape[-1]
+    pool_hw = _pool_hw_from(n_flat, c)
+    x = _adaptive_avg_pool(x, pool_hw).reshape(x.shape[0], -1)
+    latent = jax.nn.elu(x @ enc["proj"]["w"] + enc["proj"]["b"])
+    latent = latent.reshape(*lead, -1)
+    return jnp.concatenate([latent, vec], axis=-1)
+
+
+def _pool_hw_from(n_flat: int, channels: int) -> tuple[int, int]:
+    cells = n_flat // channels
+    side = int(round(math.sqrt(cells)))
+    if side * side != cells:
+        raise ValueError(f"encoder proj expects {cells} pooled cells, not a square pool")
+    return side, side
+
+
+def actor_mean(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
+    """Policy mean: [..., D] -> [..., A]."""
+    return _mlp(params["actor"], encode(params, obs, layout))
+
+
+def value(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
+    """State value from the privileged stream: [..., D] -> [...]."""
+    return _mlp(params["critic"], encode(params, obs, layout))[..., 0]
+
+
+def log_prob(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
+    """Diagonal Gaussian log-density summed over the action axis: [..., A] -> [...]."""
+    z = (action - mean) * jnp.exp(-log_std)
+    return jnp.sum(-0.5 * z * z - log_std - 0.5 * _LOG_2PI, axis=-1)
+
+
+def entropy(log_std: jax.Array) -> jax.Array:
+    """Entropy of the diagonal Gaussian (state-independent): [A] -> []."""
+    return jnp.sum(log_std + 0.5 * (1.0 + _LOG_2PI))
+
+
+def sample(rng: jax.Array, mean: jax.Array, log_std: jax.Array) -> jax.Array:
+    """Draw an action: mean + std * N(0, 1), [..., A]."""
+    return mean + jnp.exp(log_std) * jax.random.normal(rng, mean.shape, mean.dtype)
+
+
+def gaussian_kl(
+    mean_old: jax.Array, log_std_old: jax.Array, mean_new: jax.Array, log_std_new: jax.Array
+) -> jax.Array:
+    """KL(old || new) of diagonal Gaussians, summed over the action axis: [..., A] -> [...]."""
+    var_old = jnp.exp(2.0 * log_std_old)
+    var_new = jnp.exp(2.0 * log_std_new)
+    kl = log_std_new - log_std_old + (var_old + (mean_old - mean_new) ** 2) / (2.0 * var_new) - 0.5
+    return jnp.sum(kl, axis=-1)
+
+
+def param_count(params: Params) -> int:
+    return sum(int(x.size) for x in jax.tree_util.tree_leaves(params))

@@ -1,0 +1,688 @@
+"""The compiled training loop and the host loop around it.
+
+``make_train(config, env)`` returns ``(init, chunk)``:
+
+- ``init(rng) -> TrainState``: params, Adam state, normaliser, the batched env state (all robots
+  reset with ``jax.vmap(env.reset)``), RNG, counters, running episode stats.
+- ``chunk(state) -> (state, metrics)``: ONE jitted call running ``train.iterations_per_chunk``
+  iterations as a ``lax.scan`` of (rollout scan of ``unroll_length`` steps for all robots ->
+  GAE -> PPO update -> normaliser update). The state argument is donated.
+
+``config`` is any object with attributes ``ppo`` (PPOConfig), ``network`` (NetworkConfig) and
+``train`` (TrainConfig), e.g. ``LearnerConfig`` below or the env engineer's ExperimentConfig. If it
+is a dataclass, the whole of it is saved in checkpoints and ``config.json``.
+
+``env`` follows brax's Env interface, unbatched, with the auto-reset inside ``step``; obs is a dict
+{"state", "privileged_state"} of [D] vectors laid out as [vec | map]; ``env.map_shape`` is the
+map's (h, w) or () and ``env.action_size`` the action size; ``state.info["truncation"]`` and
+``state.info["final_obs"]`` drive the bootstrap on timeouts (missing -> treated as 0 / obs).
+
+Data parallel: robots are split over all local devices (a 1-D Mesh named "batch"); the env
+state, running episode stats and rollout are sharded on their robot axis, everything else is
+replicated; XLA (GSPMD) inserts the gradient averaging. One device works unchanged.
+
+``run(config, env, run_dir=None, resume=False, on_chunk=None)`` is the host loop: progress,
+metrics (``metrics.jsonl``, TensorBoard under ``tb/``), checkpoints under ``checkpoints/``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import signal
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from mjx_stairs import checkpoint, logging_utils, networks, normalizer, optim, ppo
+from mjx_stairs.config import to_dict
+from mjx_stairs.networks import NetworkConfig, ObsLayout
+from mjx_stairs.ppo import PPOConfig
+
+BATCH_AXIS = "batch"
+OBS_KEYS = ("state", "privileged_state")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Scale, schedule, run naming, logging and checkpointing of a training run."""
+
+    experiment: str = field(default="default", metadata={"help": "run name prefix"})
+    seed: int = field(default=0, metadata={"help": "master seed (params, env, sampling)"})
+    num_envs: int = field(default=4096, metadata={"help": "robots in parallel (all devices)"})
+    unroll_length: int = field(default=24, metadata={"help": "steps per robot per iteration"})
+    iterations_per_chunk: int = field(
+        default=10, metadata={"help": "iterations per compiled chunk (host sees every K)"}
+    )
+    total_iterations: int = field(
+        default=1500, metadata={"help": "stop at this iteration (rounded up to whole chunks)"}
+    )
+    max_env_steps: int = field(
+        default=0, metadata={"help": "stop once this many env steps are done in total (0 = off)"}
+    )
+    time_budget_s: float = field(
+        default=0.0,
+        metadata={"help": "wall-clock seconds for this invocation; checkpoint and stop before "
+                  "the next chunk would overrun it (0 = off)"},
+    )
+    log_dir: str = field(default="runs", metadata={"help": "parent of the run directories"})
+    checkpoint_every: int = field(
+        default=10, metadata={"help": "full checkpoint every N chunks (and always at the end)"}
+    )
+    keep_checkpoints: int = field(
+        default=3, metadata={"help": "full checkpoints kept per run (0 = all)"}
+    )
+    tensorboard: bool = field(default=True, metadata={"help": "write TensorBoard scalars"})
+    progress: bool = field(default=True, metadata={"help": "tqdm progress bar"})
+    console: bool = field(default=True, metadata={"help": "print a metrics block per chunk"})
+
+
+@dataclass(frozen=True)
+class LearnerConfig:
+    """The learner's part of an experiment; ExperimentConfig adds ``env`` beside these."""
+
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+
+class TrainState(NamedTuple):
+    """Everything a resume needs. B = num_envs (sharded over devices on this axis)."""
+
+    params: networks.Params
+    opt_state: optim.AdamState
+    normalizer: dict[str, normalizer.RunningStats]  # {"state": ..., "privileged_state": ...}
+    env_state: Any  # brax State, every leaf [B, ...]
+    rng: jax.Array  # [2] uint32 PRNGKey
+    iteration: jax.Array  # [] int32 iterations done
+    ep_return: jax.Array  # [B] return of each robot's running episode
+    ep_length: jax.Array  # [B] steps of each robot's running episode
+
+
+class Transition(NamedTuple):
+    """One rollout step for all robots; stacked to [T, B, ...] by the rollout scan."""
+
+    obs: jax.Array  # [B, D] actor obs (raw)
+    critic_obs: jax.Array  # [B, D] privileged obs (raw)
+    action: jax.Array  # [B, A]
+    log_prob: jax.Array  # [B]
+    mean: jax.Array  # [B, A]
+    value: jax.Array  # [B] V(obs_t)
+    reward: jax.Array  # [B]
+    done: jax.Array  # [B]
+    truncation: jax.Array  # [B]
+    final_value: jax.Array  # [B] V(final obs of step t)
+
+
+# ----------------------------------------------------------------------------- env glue
+
+
+def obs_layout(env) -> ObsLayout:
+    """ObsLayout from the env: D from the reset obs shapes, map from ``env.map_shape``."""
+    obs = jax.eval_shape(env.reset, jax.random.PRNGKey(0)).obs
+    if not isinstance(obs, dict) or any(k not in obs for k in OBS_KEYS):
+        raise ValueError(f"env obs must be a dict with keys {OBS_KEYS}, got {type(obs)}")
+    d = obs["state"].shape[-1]
+    if obs["privileged_state"].shape[-1] != d:
+        raise ValueError(
+            f"obs 'state' ({d}) and 'privileged_state' ({obs['privileged_state'].shape[-1]}) "
+            "must have the same size"
+        )
+    map_shape = tuple(int(x) for x in getattr(env, "map_shape", ()) or ())
+    n_map = math.prod(map_shape) if map_shape else 0
+    if n_map > d:
+        raise ValueError(f"env.map_shape {map_shape} is larger than the obs size {d}")
+    return ObsLayout(n_vec=d - n_map, map_shape=map_shape)
+
+
+def _truncation(env_state) -> jax.Array:
+    return env_state.info.get("truncation", jnp.zeros_like(env_state.done))
+
+
+def _final_obs(env_state) -> dict[str, jax.Array]:
+    return env_state.info.get("final_obs", env_state.obs)
+
+
+# ----------------------------------------------------------------------------- sharding
+
+
+def make_mesh(devices: list | None = None) -> Mesh:
+    """1-D mesh over all local devices (or ``devices``), axis name "batch"."""
+    devs = jax.local_devices() if devices is None else devices
+    return Mesh(np.array(devs), (BATCH_AXIS,))
+
+
+def state_sharding(state: TrainState, mesh: Mesh) -> TrainState:
+    """Shardings for a TrainState (or its eval_shape): robot axis split, the rest replicated."""
+    rep = NamedSharding(mesh, P())
+    bat = NamedSharding(mesh, P(BATCH_AXIS))
+
+    def batched(x):
+        return bat if len(getattr(x, "shape", ())) >= 1 else rep
+
+    return TrainState(
+        params=jax.tree_util.tree_map(lambda _: rep, state.params),
+        opt_state=jax.tree_util.tree_map(lambda _: rep, state.opt_state),
+        normalizer=jax.tree_util.tree_map(lambda _: rep, state.normalizer),
+        env_state=jax.tree_util.tree_map(batched, state.env_state),
+        rng=rep,
+        iteration=rep,
+        ep_return=bat,
+        ep_length=bat,
+    )
+
+
+def shard_state(state: TrainState, mesh: Mesh) -> TrainState:
+    """Place a (host) TrainState on the mesh."""
+    return jax.device_put(state, state_sharding(state, mesh))
+
+
+def _constrain(tree: Any, mesh: Mesh, axis: int) -> Any:
+    """Pin the robot/sample axis ``axis`` of every leaf to the mesh (no-op where it won't split)."""
+    n = mesh.devices.size
+    if n == 1:
+        return tree
+
+    def one(x):
+        if x.ndim <= axis or x.shape[axis] % n:
+            return x
+        spec = P(*([None] * axis), BATCH_AXIS)
+        return jax.lax.with_sharding_constraint(x, NamedSharding(mesh, spec))
+
+    return jax.tree_util.tree_map(one, tree)
+
+
+# ----------------------------------------------------------------------------- compiled parts
+
+
+def init_state(rng: jax.Array, *, config, env, layout: ObsLayout) -> TrainState:
+    """Fresh TrainState; all robots reset."""
+    tc: TrainConfig = config.train
+    k_params, k_env, k_train = jax.random.split(rng, 3)
+    params = networks.init_params(
+        k_params, config.network, layout.n_vec, layout.map_shape, env.action_size
+    )
+    env_state = jax.vmap(env.reset)(jax.random.split(k_env, tc.num_envs))
+    zeros = jnp.zeros((tc.num_envs,), jnp.float32)
+    return TrainState(
+        params=params,
+        opt_state=optim.adam_init(params, config.ppo.learning_rate),
+        normalizer={k: normalizer.init_stats(layout.obs_size) for k in OBS_KEYS},
+        env_state=env_state,
+        rng=k_train,
+        iteration=jnp.zeros((), jnp.int32),
+        ep_return=zeros,
+        ep_length=zeros,
+    )
+
+
+def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layout: ObsLayout,
+                 mesh: Mesh):
+    """Act with the current policy, step every robot, record the transition."""
+    env_state, ep_return, ep_length = carry
+    obs = env_state.obs["state"]
+    critic_obs = env_state.obs["privileged_state"]
+    mean = ppo.policy_mean(params, norm, obs, net_cfg, layout)
+    action = networks.sample(key, mean, params["log_std"])
+    log_prob = networks.log_prob(mean, params["log_std"], action)
+    value = ppo.critic_value(params, norm, critic_obs, net_cfg, layout)
+
+    next_state = jax.vmap(env.step)(env_state, action)
+    next_state = _constrain(next_state, mesh, 0)
+    done = next_state.done.astype(jnp.float32)
+    truncation = _truncation(next_state).astype(jnp.float32)
+    final_obs = _final_obs(next_state)["privileged_state"]
+    final_value = ppo.critic_value(params, norm, final_obs, net_cfg, layout)
+
+    ep_return = ep_return + next_state.reward
+    ep_length = ep_length + 1.0
+    ep_stats = {
+        "count": jnp.sum(done),
+        "return_sum": jnp.sum(done * ep_return),
+        "length_sum": jnp.sum(done * ep_length),
+    }
+    ep_return = ep_return * (1.0 - done)
+    ep_length = ep_length * (1.0 - done)
+    env_metrics = jax.tree_util.tree_map(lambda x: jnp.mean(x.astype(jnp.float32)),
+                                         dict(next_state.metrics))
+    env_metrics["reward/total"] = jnp.mean(next_state.reward)
+    tr = Transition(obs, critic_obs, action, log_prob, mean, value, next_state.reward.astype(
+        jnp.float32), done, truncation, final_value)
+    return (next_state, ep_return, ep_length), (tr, env_metrics, ep_stats)
+
+
+def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
+    pc: PPOConfig = config.ppo
+    nc: NetworkConfig = config.network
+    T = config.train.unroll_length
+    rng, k_roll, k_update = jax.random.split(state.rng, 3)
+    step = functools.partial(
+        rollout_step, env=env, params=state.params, norm=state.normalizer, net_cfg=nc,
+        layout=layout, mesh=mesh,
+    )
+    (env_state, ep_return, ep_length), (tr, env_metrics, ep_stats) = jax.lax.scan(
+        step, (state.env_state, state.ep_return, state.ep_length), jax.random.split(k_roll, T)
+    )
+    tr = _constrain(tr, mesh, 1)
+    bootstrap = ppo.critic_value(
+        state.params, state.normalizer, env_state.obs["privileged_state"], nc, layout
+    )
+    termination = tr.done * (1.0 - tr.truncation)
+    adv, target = ppo.compute_gae(
+        tr.truncation, termination, tr.reward, tr.value, bootstrap, pc.gae_lambda, pc.discount,
+        tr.final_value,
+    )
+    batch = ppo.Batch(
+        obs=tr.obs, critic_obs=tr.critic_obs, action=tr.action, log_prob=tr.log_prob,
+        mean=tr.mean, value=tr.value, advantage=adv, target=target,
+    )
+    # [T, B] -> [B, T] so the flattened sample axis stays contiguous per device.
+    batch = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), batch)
+    batch = _constrain(batch, mesh, 0)
+    params, opt_state, upd_metrics = ppo.update(
+        state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
+        constrain=lambda b: _constrain(b, mesh, 1),
+    )
+    norm = state.normalizer
+    if nc.normalize_obs:
+        norm = {
+            "state": normalizer.update_stats(norm["state"], tr.obs),
+            "privileged_state": normalizer.update_stats(norm["privileged_state"], tr.critic_obs),
+        }
+    metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
+    metrics.update(upd_metrics)
+    metrics["value/mean"] = jnp.mean(tr.value)
+    metrics["value/target_mean"] = jnp.mean(target)
+    metrics["episode/terminations"] = jnp.sum(termination)
+    metrics["episode/truncations"] = jnp.sum(tr.truncation)
+    metrics.update({f"_ep/{k}": jnp.sum(v) for k, v in ep_stats.items()})
+    new_state = TrainState(
+        params=params, opt_state=opt_state, normalizer=norm, env_state=env_state, rng=rng,
+        iteration=state.iteration + 1, ep_return=ep_return, ep_length=ep_length,
+    )
+    return new_state, metrics
+
+
+def reduce_chunk_metrics(per_iter: dict[str, jax.Array]) -> dict[str, jax.Array]:
+    """[K] per-iteration metrics -> chunk scalars: means; episode stats pooled; lr = last."""
+    out = {}
+    for k, v in per_iter.items():
+        if k.startswith("_ep/"):
+            continue
+        out[k] = jnp.mean(v)
+    out["opt/lr"] = per_iter["opt/lr"][-1]
+    count = jnp.sum(per_iter["_ep/count"])
+    out["episode/count"] = count
+    out["episode/return"] = jnp.sum(per_iter["_ep/return_sum"]) / jnp.maximum(count, 1.0)
+    out["episode/length"] = jnp.sum(per_iter["_ep/length_sum"]) / jnp.maximum(count, 1.0)
+    out["episode/terminations"] = jnp.sum(per_iter["episode/terminations"])
+    out["episode/truncations"] = jnp.sum(per_iter["episode/truncations"])
+    return out
+
+
+def run_chunk(state: TrainState, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """K training iterations as one lax.scan; returns (state, chunk metrics)."""
+    it = functools.partial(training_iteration, config=config, env=env, layout=layout, mesh=mesh)
+    state, per_iter = jax.lax.scan(it, state, None, length=config.train.iterations_per_chunk)
+    return state, reduce_chunk_metrics(per_iter)
+
+
+# ----------------------------------------------------------------------------- make_train
+
+
+class Trainer(NamedTuple):
+    init: Callable[[jax.Array], TrainState]
+    chunk: Callable[[TrainState], tuple[TrainState, dict]]
+    layout: ObsLayout
+    mesh: Mesh
+    sharding: TrainState  # shardings of the TrainState
+    template: TrainState  # ShapeDtypeStructs of the TrainState
+
+
+def _check(config, mesh: Mesh) -> None:
+    tc, pc = config.train, config.ppo
+    n_dev = mesh.devices.size
+    if tc.num_envs % n_dev:
+        raise ValueError(f"train.num_envs={tc.num_envs} must divide over {n_dev} devices")
+    n = tc.num_envs * tc.unroll_length
+    if n % pc.num_minibatches:
+        raise ValueError(
+            f"num_envs * unroll_length = {n} does not split into ppo.num_minibatches="
+            f"{pc.num_minibatches}"
+        )
+    if pc.lr_schedule not in ("adaptive", "fixed"):
+        raise ValueError(f"ppo.lr_schedule must be 'adaptive' or 'fixed', not {pc.lr_schedule!r}")
+
+
+def build_trainer(config, env, mesh: Mesh | None = None) -> Trainer:
+    """make_train plus what the host loop needs (layout, mesh, shardings, state template)."""
+    mesh = make_mesh() if mesh is None else mesh
+    _check(config, mesh)
+    layout = obs_layout(env)
+    init_fn = functools.partial(init_state, config=config, env=env, layout=layout)
+    template = jax.eval_shape(init_fn, jax.random.PRNGKey(0))
+    sharding = state_sharding(template, mesh)
+    rep = NamedSharding(mesh, P())
+    init = jax.jit(init_fn, out_shardings=sharding)
+    chunk_fn = functools.partial(run_chunk, config=config, env=env, layout=layout, mesh=mesh)
+    chunk = jax.jit(chunk_fn, in_shardings=(sharding,), out_shardings=(sharding, rep),
+                    donate_argnums=0)
+    return Trainer(init, chunk, layout, mesh, sharding, template)
+
+
+def make_train(config, env, mesh: Mesh | None = None):
+    """``(init, chunk)``: ``init(rng) -> TrainState``; ``chunk(state) -> (state, metrics)``
+    runs ``config.train.iterations_per_chunk`` iterations in one compiled call (state donated).
+    """
+    t = build_trainer(config, env, mesh)
+    return t.init, t.chunk
+
+
+# ----------------------------------------------------------------------------- checkpoints
+
+
+def _config_dict(config) -> dict[str, Any]:
+    if dataclasses.is_dataclass(config):
+        return to_dict(config)
+    return {k: to_dict(getattr(config, k)) for k in ("ppo", "network", "train")}
+
+
+def _layout_dict(layout: ObsLayout) -> dict[str, Any]:
+    return {"n_vec": layout.n_vec, "map_shape": list(layout.map_shape),
+            "obs_size": layout.obs_size, "obs_keys": list(OBS_KEYS),
+            "order": "[vec (n_vec) | map (row-major h*w)]"}
+
+
+def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
+               extra: dict | None = None) -> None:
+    """Full checkpoint: the whole TrainState + config and counters as metadata."""
+    host = jax.device_get(state)
+    it = int(host.iteration)
+    tc = config.train
+    meta = {
+        "kind": "train_state",
+        "iteration": it,
+        "env_steps": it * tc.num_envs * tc.unroll_length,
+        "config": _config_dict(config),
+        "layout": _layout_dict(layout),
+        "action_size": int(host.params["log_std"].shape[0]),
+        "jax_version": jax.__version__,
+        "saved_at": time.time(),
+    }
+    meta.update(extra or {})
+    checkpoint.save(path, host, meta)
+
+
+def load_state(path: str | Path, trainer: Trainer) -> tuple[TrainState, dict]:
+    """Read a full checkpoint into the trainer's TrainState structure, placed on its mesh."""
+    host, meta = checkpoint.load(path, trainer.template)
+    if meta.get("kind") != "train_state":
+        raise checkpoint.CheckpointError(f"{path}: not a train-state checkpoint")
+    return jax.device_put(host, trainer.sharding), meta
+
+
+def save_policy(path: str | Path, state: TrainState, config, layout: ObsLayout) -> None:
+    """Policy-only file for eval/export: params + normaliser + network config + obs layout."""
+    tree = {"params": jax.device_get(state.params),
+            "normalizer": jax.device_get(state.normalizer)}
+    it = int(jax.device_get(state.iteration))
+    tc = config.train
+    meta = {
+        "kind": "policy",
+        "iteration": it,
+        "env_steps": it * tc.num_envs * tc.unroll_length,
+        "network": to_dict(config.network),
+        "config": _config_dict(config),
+        "layout": _layout_dict(layout),
+        "action_size": int(tree["params"]["log_std"].shape[0]),
+    }
+    checkpoint.save(path, tree, meta)
+
+
+class Policy(NamedTuple):
+    params: networks.Params
+    normalizer: dict[str, normalizer.RunningStats]
+    network: NetworkConfig
+    layout: ObsLayout
+    action_size: int
+    metadata: dict
+
+
+def load_policy(path: str | Path) -> Policy:
+    """Read a policy file written by ``save_policy`` (validated against its own metadata)."""
+    from mjx_stairs.config import ConfigError, from_dict
+
+    meta = checkpoint.load_metadata(path)
+    if meta.get("kind") != "policy":
+        raise checkpoint.CheckpointError(f"{path}: not a policy file (kind={meta.get('kind')})")
+    try:
+        net_cfg = from_dict(NetworkConfig, meta["network"])
+        layout = ObsLayout(int(meta["layout"]["n_vec"]), tuple(meta["layout"]["map_shape"]))
+        a = int(meta["action_size"])
+    except (KeyError, ConfigError, TypeError, ValueError) as e:
+        raise checkpoint.CheckpointError(f"{path}: bad policy metadata ({e})") from None
+    template = jax.eval_shape(lambda: {
+        "params": networks.init_params(jax.random.PRNGKey(0), net_cfg, layout.n_vec,
+                                       layout.map_shape, a),
+        "normalizer": {k: normalizer.init_stats(layout.obs_size) for k in OBS_KEYS},
+    })
+    tree, meta = checkpoint.load(path, template)
+    return Policy(tree["params"], tree["normalizer"], net_cfg, layout, a, meta)
+
+
+def policy_action(policy: Policy, obs: jax.Array, rng: jax.Array | None = None) -> jax.Array:
+    """Action for raw actor obs [..., D]: the mean, or a sample when ``rng`` is given."""
+    mean = ppo.policy_mean(policy.params, policy.normalizer, obs, policy.network, policy.layout)
+    if rng is None:
+        return mean
+    return networks.sample(rng, mean, policy.params["log_std"])
+
+
+def policy_value(policy: Policy, critic_obs: jax.Array) -> jax.Array:
+    """Critic value for raw privileged obs [..., D] -> [...]."""
+    return ppo.critic_value(policy.params, policy.normalizer, critic_obs, policy.network,
+                            policy.layout)
+
+
+# ----------------------------------------------------------------------------- host loop
+
+
+class RunResult(NamedTuple):
+    run_dir: Path
+    state: TrainState
+    metrics: dict[str, Any]  # last chunk's record
+    stop_reason: str
+
+
+def _config_diff(a: dict, b: dict, prefix: str = "") -> list[str]:
+    out = []
+    for k in sorted(set(a) | set(b)):
+        key = f"{prefix}.{k}" if prefix else k
+        va, vb = a.get(k), b.get(k)
+        if isinstance(va, dict) and isinstance(vb, dict):
+            out.extend(_config_diff(va, vb, key))
+        elif va != vb:
+            out.append(f"{key}: {va!r} -> {vb!r}")
+    return out
+
+
+class _StopFlag:
+    """Set by SIGTERM/SIGINT: finish the running chunk, checkpoint, exit."""
+
+    def __init__(self):
+        self.reason = ""
+        self._old = {}
+
+    def __enter__(self):
+        try:
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                self._old[sig] = signal.signal(sig, self._handle)
+        except ValueError:  # not in the main thread
+            self._old = {}
+        return self
+
+    def _handle(self, signum, _frame):
+        if self.reason:  # second signal: give up at once
+            raise KeyboardInterrupt
+        self.reason = f"signal {signal.Signals(signum).name}"
+
+    def __exit__(self, *exc):
+        for sig, h in self._old.items():
+            signal.signal(sig, h)
+        return False
+
+
+def run(
+    config,
+    env,
+    run_dir: str | Path | None = None,
+    resume: bool = False,
+    on_chunk: Callable[[dict[str, Any]], bool | None] | None = None,
+    mesh: Mesh | None = None,
+) -> RunResult:
+    """Train until ``train.total_iterations`` (rounded up to whole chunks), ``max_env_steps``,
+    the ``time_budget_s`` or a signal; checkpoint and return.
+
+    run_dir: None -> a new ``<log_dir>/<experiment>__<seed>__<time>`` (or, with resume, the
+      newest such directory). resume: continue from the newest ``checkpoints/state_*.npz``.
+    on_chunk(record): called after each chunk with the logged record; returning True stops.
+    """
+    t_start = time.time()
+    tc: TrainConfig = config.train
+    trainer = build_trainer(config, env, mesh)
+    steps_per_iter = tc.num_envs * tc.unroll_length
+    K = tc.iterations_per_chunk
+
+    if run_dir is None:
+        if resume:
+            run_dir = logging_utils.latest_run_dir(tc.log_dir, tc.experiment, tc.seed)
+            if run_dir is None:
+                raise FileNotFoundError(
+                    f"--resume: no run '{tc.experiment}__{tc.seed}__*' under {tc.log_dir}"
+                )
+        else:
+            run_dir = logging_utils.new_run_dir(tc.log_dir, tc.experiment, tc.seed)
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    ckpt_dir = run_dir / "checkpoints"
+
+    if resume:
+        path = checkpoint.latest_checkpoint(ckpt_dir)
+        if path is None:
+            raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
+        state, meta = load_state(path, trainer)
+        diff = _config_diff(meta.get("config", {}), _config_dict(config))
+        if diff:
+            warnings.warn(f"resuming {path} with a changed config: {'; '.join(diff)}",
+                          stacklevel=2)
+        logging_utils.truncate_jsonl(run_dir / "metrics.jsonl", int(meta["iteration"]))
+        print(f"resumed {path} at iteration {meta['iteration']}", flush=True)
+    else:
+        state = trainer.init(jax.random.PRNGKey(tc.seed))
+        (run_dir / "config.json").write_text(json.dumps(_config_dict(config), indent=2))
+
+    t0 = time.time()
+    compiled = trainer.chunk.lower(state).compile()
+    compile_s = time.time() - t0
+
+    iteration = int(jax.device_get(state.iteration))
+    n_chunks_total = -(-tc.total_iterations // K)
+    target_iter = n_chunks_total * K
+    logger = logging_utils.MetricsLogger(run_dir, tensorboard=tc.tensorboard)
+    bar = None
+    if tc.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=target_iter * steps_per_iter, initial=iteration * steps_per_iter,
+                   unit="step", unit_scale=True, dynamic_ncols=True)
+    record: dict[str, Any] = {}
+    stop_reason = ""
+    chunk_s_est = 0.0
+    save_s_est = 0.0
+    chunks_since_ckpt = 0
+    saved_iteration = iteration if resume else -1
+
+    def checkpoint_now(st: TrainState) -> None:
+        nonlocal save_s_est, saved_iteration
+        t = time.time()
+        it = int(jax.device_get(st.iteration))
+        save_state(checkpoint.checkpoint_path(ckpt_dir, it), st, config, trainer.layout)
+        save_policy(run_dir / "policy.npz", st, config, trainer.layout)
+        checkpoint.prune(ckpt_dir, tc.keep_checkpoints)
+        save_s_est = max(save_s_est, time.time() - t)
+        saved_iteration = it
+
+    try:
+        with _StopFlag() as flag:
+            while True:
+                if iteration >= target_iter:
+                    stop_reason = "total_iterations"
+                elif tc.max_env_steps > 0 and iteration * steps_per_iter >= tc.max_env_steps:
+                    stop_reason = "max_env_steps"
+                elif tc.time_budget_s > 0 and (
+                    time.time() - t_start + 1.2 * chunk_s_est + 1.5 * save_s_est + 1.0
+                    > tc.time_budget_s
+                ):
+                    stop_reason = "time_budget"
+                elif flag.reason:
+                    stop_reason = flag.reason
+                if stop_reason:
+                    break
+                t = time.time()
+                state, metrics = compiled(state)
+                metrics = {k: float(v) for k, v in jax.device_get(metrics).items()}
+                chunk_s = time.time() - t
+                chunk_s_est = chunk_s
+                iteration += K
+                env_steps = iteration * steps_per_iter
+                record = {
+                    "iteration": iteration,
+                    "env_steps": env_steps,
+                    "wall_time": time.time() - t_start,
+                    "perf/chunk_s": chunk_s,
+                    "perf/steps_per_s": K * steps_per_iter / chunk_s,
+                    "perf/compile_s": compile_s,
+                    **metrics,
+                }
+                logger.log(record, step=env_steps)
+                if bar is not None:
+                    bar.update(K * steps_per_iter)
+                    post = {"ret": f"{metrics['episode/return']:.3g}"}
+                    for k in ("level", "success"):
+                        if k in metrics:
+                            post[k] = f"{metrics[k]:.3g}"
+                    bar.set_postfix(post, refresh=False)
+                if tc.console:
+                    text = logging_utils.console_block(record, target_iter)
+                    if bar is not None:
+                        bar.write(text)
+                    else:
+                        print(text, flush=True)
+                chunks_since_ckpt += 1
+                if tc.checkpoint_every > 0 and chunks_since_ckpt >= tc.checkpoint_every:
+                    checkpoint_now(state)
+                    chunks_since_ckpt = 0
+                if on_chunk is not None and on_chunk(record):
+                    stop_reason = "on_chunk"
+                    break
+            if saved_iteration != iteration:
+                checkpoint_now(state)
+    finally:
+        if bar is not None:
+            bar.close()
+        logger.close()
+    msg = (f"stopped ({stop_reason}) at iteration {iteration}, "
+           f"{iteration * steps_per_iter:,} env steps; run dir {run_dir}")
+    print(msg, flush=True)
+    return RunResult(run_dir, state, record, stop_reason)
