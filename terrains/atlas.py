@@ -1,0 +1,186 @@
+"""The Atlas: a grid of tiles (rows = levels, columns = variants of one or more families) merged
+into one heightfield with a flat border, plus per-tile tables in the WORLD frame.
+
+World frame: the atlas corner point is (0, 0); ``heights[iy, ix]`` is at (ix * res, iy * res).
+Tile t = row * cols + col has its corner at (border + col * tile_size, border + row * tile_size),
+i.e. at grid index (round(origin / res)); its [n, n] points follow from there.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .families import FAMILIES, make_tile, variants
+from .levels import check_family
+from .levels import levels as level_table
+from .tile import (
+    CENTRELINE_POINTS,
+    DEFAULT_RESOLUTION,
+    DEFAULT_TILE_SIZE,
+    Tile,
+    atomic_savez,
+    load_npz,
+)
+
+_TABLES = ("origin", "spawn", "goal", "centreline", "level", "family", "variant",
+           "floor_height", "goal_height")
+
+
+@dataclass(eq=False)
+class Atlas:
+    """Tiles merged into one heightfield.
+
+    heights:      [NY, NX] float32, m, whole atlas including the border; the atlas corner point
+                  is world (0, 0).
+    resolution:   m between points.  tile_size: m.  border: flat border (height 0) around, m.
+    rows, cols:   rows = levels, cols = variants (families side by side).
+    families:     family names; ``family`` indexes into it.
+    schedule:     level schedule the rows come from.  level_ids: [rows] 0-based level per row.
+    Per tile t = row * cols + col, WORLD frame:
+    origin [n, 2] tile corner xy; spawn [n, 7]; goal [n, 4]; centreline [n, K, 3];
+    level [n] int32 (0-based); family [n] int32; variant [n] int32 (index into the family's
+    variants); floor_height [n] float32; goal_height [n] float32.
+    variant_names: per family, the names its variant ids refer to.
+    """
+
+    heights: np.ndarray
+    resolution: float
+    tile_size: float
+    border: float
+    rows: int
+    cols: int
+    families: tuple[str, ...]
+    origin: np.ndarray
+    spawn: np.ndarray
+    goal: np.ndarray
+    centreline: np.ndarray
+    level: np.ndarray
+    family: np.ndarray
+    variant: np.ndarray
+    floor_height: np.ndarray
+    goal_height: np.ndarray
+    schedule: str = "train"
+    variant_names: tuple[tuple[str, ...], ...] = ()
+
+    @property
+    def num_tiles(self) -> int:
+        return self.rows * self.cols
+
+    @property
+    def tile_points(self) -> int:
+        """Grid points per tile side, tile_size / resolution."""
+        return int(round(self.tile_size / self.resolution))
+
+    def tile_heights(self, t: int) -> np.ndarray:
+        """[n, n] view of tile ``t``'s heights inside the atlas."""
+        ix, iy = np.round(self.origin[t] / self.resolution).astype(int)
+        n = self.tile_points
+        return self.heights[iy:iy + n, ix:ix + n]
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write one .npz atomically (temporary file, then os.replace)."""
+        meta = dict(resolution=self.resolution, tile_size=self.tile_size, border=self.border,
+                    rows=self.rows, cols=self.cols, families=list(self.families),
+                    schedule=self.schedule, variant_names=[list(v) for v in self.variant_names])
+        atomic_savez(path, kind=np.array("atlas"), heights=self.heights,
+                     meta=np.array(json.dumps(meta)),
+                     **{k: getattr(self, k) for k in _TABLES})
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Atlas:
+        """Read an atlas written by save(); missing file -> FileNotFoundError, anything
+        unreadable -> one-line ValueError naming the file."""
+        data = load_npz(path, "atlas", ("heights", "meta") + _TABLES)
+        try:
+            m = json.loads(str(data["meta"]))
+            atlas = cls(heights=data["heights"], resolution=float(m["resolution"]),
+                        tile_size=float(m["tile_size"]), border=float(m["border"]),
+                        rows=int(m["rows"]), cols=int(m["cols"]),
+                        families=tuple(m["families"]), schedule=str(m["schedule"]),
+                        variant_names=tuple(tuple(v) for v in m["variant_names"]),
+                        **{k: data[k] for k in _TABLES})
+        except (KeyError, ValueError, TypeError) as e:
+            raise ValueError(f"{path}: corrupt atlas file ({e})") from None
+        n = atlas.num_tiles
+        if atlas.heights.ndim != 2 or any(len(data[k]) != n for k in _TABLES):
+            raise ValueError(f"{path}: corrupt atlas file (tables do not match {n} tiles)")
+        return atlas
+
+
+def build_atlas(families: Sequence[str], schedule: str = "train",
+                levels: Sequence[int] | None = None, variants_per_family: int = 2,
+                resolution: float = DEFAULT_RESOLUTION, tile_size: float = DEFAULT_TILE_SIZE,
+                border: float = 2.0) -> Atlas:
+    """Tiles of ``families`` (0-based ``levels`` of ``schedule``, default all) in a grid:
+    row = level, columns = for each family ``variants_per_family`` tiles cycling through its
+    variants. heights [NY, NX] with NX = (2 border + cols tile_size) / res + 1."""
+    families = tuple(families)
+    if not families:
+        raise ValueError("build_atlas needs at least one family")
+    for f in families:
+        check_family(f)
+    if variants_per_family < 1:
+        raise ValueError(f"variants_per_family must be >= 1, got {variants_per_family}")
+    if border < 0:
+        raise ValueError(f"border must be >= 0, got {border}")
+    sizes = {len(level_table(f, schedule)) for f in families}
+    if levels is None:
+        if len(sizes) != 1:
+            raise ValueError(f"families {families} have different level counts in {schedule!r}; "
+                             f"pass levels=")
+        levels = list(range(sizes.pop()))
+    levels = [int(v) for v in levels]
+    if not levels:
+        raise ValueError("build_atlas needs at least one level")
+    rows, cols = len(levels), len(families) * variants_per_family
+    n = int(round(tile_size / resolution))
+    b = int(round(border / resolution))
+    if abs(b * resolution - border) > 1e-6 * max(border, 1.0):
+        raise ValueError(f"border {border} m must be a whole multiple of the resolution "
+                         f"{resolution} m")
+    heights = np.zeros((2 * b + rows * n + 1, 2 * b + cols * n + 1), np.float32)
+    tabs = {k: [] for k in _TABLES}
+    for row, lvl in enumerate(levels):
+        for col in range(cols):
+            fi, vi = divmod(col, variants_per_family)
+            fam = families[fi]
+            names = variants(fam)
+            vi %= len(names)
+            tile = make_tile(fam, lvl, names[vi], schedule, resolution, tile_size)
+            iy, ix = b + row * n, b + col * n
+            heights[iy:iy + n, ix:ix + n] = tile.heights
+            _append(tabs, tile, np.array([ix, iy]) * resolution, fi, vi)
+    return Atlas(heights=heights, resolution=resolution, tile_size=tile_size, border=border,
+                 rows=rows, cols=cols, families=families, schedule=schedule,
+                 variant_names=tuple(variants(f) for f in families),
+                 **{k: np.asarray(v, _dtype(k)) for k, v in tabs.items()})
+
+
+def _dtype(key: str):
+    return np.int32 if key in ("level", "family", "variant") else np.float32
+
+
+def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> None:
+    """Add ``tile``'s tables, shifted by ``origin`` [2] to the world frame."""
+    spawn, goal, line = tile.spawn.copy(), tile.goal.copy(), tile.centreline.copy()
+    spawn[:2] += origin
+    goal[:2] += origin
+    line[:, :2] += origin
+    assert line.shape == (CENTRELINE_POINTS, 3)
+    tabs["origin"].append(origin)
+    tabs["spawn"].append(spawn)
+    tabs["goal"].append(goal)
+    tabs["centreline"].append(line)
+    tabs["level"].append(tile.level)
+    tabs["family"].append(fi)
+    tabs["variant"].append(vi)
+    tabs["floor_height"].append(tile.floor_height)
+    tabs["goal_height"].append(tile.goal_height)
+
+
+__all__ = ["Atlas", "build_atlas", "FAMILIES"]
