@@ -205,6 +205,7 @@ class StairEnv(Env):
         self._line = jnp.asarray(line)
         self._line_cum = jnp.asarray(cumulative, jnp.float32)  # [n, K]
         self._line_len = jnp.asarray(cumulative[:, -1], jnp.float32)  # [n]
+        self.tile_origin = np.asarray(atlas.origin, np.float32)  # [n, 2] host copy
         self._tile_level = jnp.asarray(atlas.level, jnp.int32)
         self._tile_family = jnp.asarray(atlas.family, jnp.int32)
         self._table = cur.TileTable(np.asarray(atlas.family), int(atlas.cols), len(self.families))

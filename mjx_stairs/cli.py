@@ -1,0 +1,171 @@
+"""The `mjx-stairs` command: train, eval, critic-map, bench, exp1, terrain, play, export."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from mjx_stairs.config import ConfigError
+
+
+def _csv_ints(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated integers, got {text!r}"
+        ) from None
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from mjx_stairs import experiment, train
+
+    config, cpu = experiment.load(args.config, args.overrides)
+    if cpu:
+        print(
+            f"[mjx-stairs] no GPU: running the CPU preset of {args.config} "
+            f"({config.train.num_envs} robots, {config.train.total_iterations} iterations); "
+            "the full run needs a GPU",
+            flush=True,
+        )
+    env = experiment.make_env(config)
+    train.run(config, env, run_dir=args.run_dir, resume=args.resume)
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from mjx_stairs import evaluate
+
+    spec = evaluate.EvalSpec(
+        schedule=args.schedule,
+        levels=tuple(lv - 1 for lv in args.levels),
+        robots_per_level=args.robots,
+        episode_length_s=args.episode_s,
+        seed=args.seed,
+        resolution=args.resolution,
+    )
+    evaluate.evaluate(args.checkpoint, args.family, spec, args.out)
+    return 0
+
+
+def cmd_critic_map(args: argparse.Namespace) -> int:
+    from mjx_stairs import evaluate
+    from mjx_stairs.train import load_policy
+
+    policy = load_policy(args.checkpoint)
+    m = evaluate.critic_map(
+        policy, args.family, args.level - 1, args.variant, resolution=args.resolution
+    )
+    evaluate.plot_critic_map(m, args.out, f"critic value, {args.family} test level {args.level}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from mjx_stairs import bench, experiment
+    from mjx_stairs.evaluate import write_atomic
+
+    config, _ = experiment.load(args.config, args.overrides, cpu=False)
+    out = bench.run_bench(
+        config,
+        list(args.robots),
+        steps=args.steps,
+        repeats=args.repeats,
+        parts=tuple(args.parts.split(",")),
+    )
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(args.out, json.dumps(out, indent=2))
+        print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_terrain(args: argparse.Namespace) -> int:
+    from terrains.__main__ import main as terrains_main
+
+    return int(terrains_main(args.rest) or 0)
+
+
+def cmd_not_yet(args: argparse.Namespace) -> int:
+    print(f"mjx-stairs {args.command}: not built yet", file=sys.stderr)
+    return 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="mjx-stairs", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    t = sub.add_parser("train", help="train from an experiment TOML")
+    t.add_argument("config", help="experiments/*.toml")
+    t.add_argument("overrides", nargs="*", help="key.sub=value overrides")
+    t.add_argument(
+        "--resume", action="store_true", help="continue the newest run of this experiment"
+    )
+    t.add_argument("--run-dir", default=None, help="run directory (default: a new one)")
+    t.set_defaults(fn=cmd_train)
+
+    e = sub.add_parser("eval", help="success rate per (checkpoint, family, level)")
+    e.add_argument("--checkpoint", nargs="+", required=True, help="policy.npz file(s)")
+    e.add_argument("--family", nargs="+", default=["u_shaped"])
+    e.add_argument("--levels", type=_csv_ints, default=(), help="1-based, e.g. 1,2,3 (default all)")
+    e.add_argument("--robots", type=int, default=1000, help="robots per level")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--schedule", default="test", help="train | test | extended")
+    e.add_argument("--episode-s", type=float, default=20.0, help="evaluation episode length (s)")
+    e.add_argument("--resolution", type=float, default=0.025)
+    e.add_argument("--out", default=None, help="directory for results.json and results.md")
+    e.set_defaults(fn=cmd_eval)
+
+    c = sub.add_parser("critic-map", help="the critic's value over a tile (paper Fig. 4)")
+    c.add_argument("--checkpoint", required=True)
+    c.add_argument("--family", default="u_shaped")
+    c.add_argument("--level", type=int, default=3, help="1-based test level")
+    c.add_argument("--variant", type=int, default=0)
+    c.add_argument("--resolution", type=float, default=0.025)
+    c.add_argument("--out", required=True, help="PNG path")
+    c.set_defaults(fn=cmd_critic_map)
+
+    b = sub.add_parser("bench", help="physics / env / training throughput")
+    b.add_argument("--config", default="experiments/stage2_u.toml")
+    b.add_argument("overrides", nargs="*")
+    b.add_argument("--robots", type=int, nargs="+", default=[4096, 16384])
+    b.add_argument("--steps", type=int, default=24)
+    b.add_argument("--repeats", type=int, default=5)
+    b.add_argument("--parts", default="physics,env,train")
+    b.add_argument("--out", default=None, help="JSON path")
+    b.set_defaults(fn=cmd_bench)
+
+    tr = sub.add_parser("terrain", help="the terrains CLI (preview, export, import)")
+    tr.add_argument("rest", nargs=argparse.REMAINDER)
+    tr.set_defaults(fn=cmd_terrain)
+
+    for name in ("play", "export"):
+        s = sub.add_parser(name, help=f"{name} (not built yet)")
+        s.add_argument("rest", nargs=argparse.REMAINDER)
+        s.set_defaults(fn=cmd_not_yet)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    t0 = time.time()
+    try:
+        code = args.fn(args)
+    except (ConfigError, FileNotFoundError, ValueError) as e:
+        print(f"mjx-stairs {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except Exception as e:  # checkpoint errors and the like: one line, no traceback
+        if type(e).__name__ in ("CheckpointError",):
+            print(f"mjx-stairs {args.command}: error: {e}", file=sys.stderr)
+            return 2
+        raise
+    if args.command in ("train", "eval", "bench"):
+        print(f"[mjx-stairs] {args.command} done in {time.time() - t0:.0f} s", flush=True)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
