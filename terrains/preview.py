@@ -43,6 +43,8 @@ def render_tile(tile: Tile, path: str | os.PathLike, size_px: int = 600,
     ax.plot([gx], [gy], marker="*", color="red", ms=16, mec="k")
     ax.arrow(gx, gy, 0.5 * np.cos(gyaw), 0.5 * np.sin(gyaw), color="red", width=0.03)
     spec = tile.spec
+    if title is None and tile.family == "imported":
+        title = f"imported {tile.variant}  rise {tile.goal_height - tile.floor_height:.2f} m"
     label = title or (f"{tile.family} {tile.variant}  level {tile.level + 1} "
                       f"({spec.get('schedule', '?')})  riser {spec.get('riser', 0) * 100:.1f} cm"
                       f"  rise {tile.goal_height:.2f} m")

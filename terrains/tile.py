@@ -158,7 +158,7 @@ def load_npz(path: str | os.PathLike, kind: str, keys: tuple[str, ...]) -> dict[
     both one line naming the file."""
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise FileNotFoundError(f"{path}: no such {kind} file")
+        raise FileNotFoundError(f"{path}: no such file")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}

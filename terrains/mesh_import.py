@@ -1,0 +1,251 @@
+"""A user's staircase mesh (OBJ / STL / GLB / PLY) -> Tile, by casting rays straight down on a
+grid; the user gives the start and the goal, the centre-line is the shortest walkable path
+between them, kept away from walls.
+
+Vertical rays hit the highest surface under each grid point, so a mesh with a ceiling must be
+cropped first or imported with ``ceiling=``. trimesh's own ray casters need rtree or embree,
+which the project does not install; ``raycast_down`` does the same for vertical rays in numpy.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import trimesh
+
+from .path import Line, resample
+from .tile import CENTRELINE_POINTS, SPAWN_MARGIN, Tile, quantise, sample_heights
+
+IMPORT_FORMATS = (".obj", ".stl", ".glb", ".gltf", ".ply", ".off")
+_CHUNK = 4_000_000  # (triangle, grid point) candidate pairs per batch
+
+
+def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
+    """Read a triangle mesh; missing, unreadable, empty or non-3-D -> one-line error naming the
+    file (FileNotFoundError for a missing file, ValueError otherwise)."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{path}: no such mesh file")
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in IMPORT_FORMATS:
+        raise ValueError(f"{path}: unsupported mesh format {ext or '(none)'}; use one of "
+                         f"{', '.join(IMPORT_FORMATS)}")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"{path}: empty file")
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except Exception as e:  # trimesh raises many kinds on bad input
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(f"{path}: cannot read mesh ({msg})") from None
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise ValueError(f"{path}: no triangle mesh in the file (got {type(mesh).__name__})")
+    if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
+        raise ValueError(f"{path}: empty mesh (no triangles)")
+    v = np.asarray(mesh.vertices)
+    if v.ndim != 2 or v.shape[1] != 3 or not np.isfinite(v).all():
+        raise ValueError(f"{path}: not a 3-D mesh (vertices of shape {v.shape})")
+    ext_xy = np.ptp(v[:, :2], axis=0)
+    if min(ext_xy) <= 0:
+        raise ValueError(f"{path}: not a 3-D staircase (flat footprint {ext_xy[0]:g} x "
+                         f"{ext_xy[1]:g} m in x, y)")
+    return mesh
+
+
+def raycast_down(vertices: np.ndarray, faces: np.ndarray, x: np.ndarray, y: np.ndarray,
+                 ceiling: float = np.inf) -> np.ndarray:
+    """Height of the highest triangle (below ``ceiling``) under each grid point.
+
+    vertices [V, 3], faces [F, 3]; x [nx], y [ny] increasing evenly spaced grid coordinates.
+    Returns [ny, nx] float64, NaN where a vertical ray hits nothing."""
+    tri = np.asarray(vertices, np.float64)[np.asarray(faces)]          # [F, 3, 3]
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    det = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+    scale = np.maximum(np.ptp(tri[:, :, :2], axis=1).max(1), 1e-12) ** 2
+    keep = np.abs(det) > 1e-9 * scale         # vertical (edge-on) triangles cannot be hit
+    a, b, c, det = a[keep], b[keep], c[keep], det[keep]
+    nx, ny = len(x), len(y)
+    out = np.full(ny * nx, -np.inf)
+    if len(a) == 0:
+        return np.full((ny, nx), np.nan)
+    dx = x[1] - x[0] if nx > 1 else 1.0
+    dy = y[1] - y[0] if ny > 1 else 1.0
+    lo = np.minimum(np.minimum(a, b), c)
+    hi = np.maximum(np.maximum(a, b), c)
+    ix0 = np.clip(np.ceil((lo[:, 0] - x[0]) / dx - 1e-9), 0, nx).astype(np.int64)
+    ix1 = np.clip(np.floor((hi[:, 0] - x[0]) / dx + 1e-9), -1, nx - 1).astype(np.int64)
+    iy0 = np.clip(np.ceil((lo[:, 1] - y[0]) / dy - 1e-9), 0, ny).astype(np.int64)
+    iy1 = np.clip(np.floor((hi[:, 1] - y[0]) / dy + 1e-9), -1, ny - 1).astype(np.int64)
+    w = np.maximum(ix1 - ix0 + 1, 0)
+    cnt = w * np.maximum(iy1 - iy0 + 1, 0)
+    cum = np.cumsum(cnt)
+    start = 0
+    while start < len(cnt):
+        base = cum[start - 1] if start else 0
+        stop = max(int(np.searchsorted(cum, base + _CHUNK, side="right")), start + 1)
+        sel = np.arange(start, stop)
+        n = cnt[sel]
+        t = np.repeat(sel, n)
+        k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        px = ix0[t] + k % w[t]
+        py = iy0[t] + k // w[t]
+        X, Y = x[px], y[py]
+        l1 = ((b[t, 1] - c[t, 1]) * (X - c[t, 0]) + (c[t, 0] - b[t, 0]) * (Y - c[t, 1])) / det[t]
+        l2 = ((c[t, 1] - a[t, 1]) * (X - c[t, 0]) + (a[t, 0] - c[t, 0]) * (Y - c[t, 1])) / det[t]
+        l3 = 1.0 - l1 - l2
+        z = l1 * a[t, 2] + l2 * b[t, 2] + l3 * c[t, 2]
+        hit = (l1 >= -1e-9) & (l2 >= -1e-9) & (l3 >= -1e-9) & (z <= ceiling)
+        np.maximum.at(out, py[hit] * nx + px[hit], z[hit])
+        start = stop
+    out[np.isneginf(out)] = np.nan
+    return out.reshape(ny, nx)
+
+
+def walk_distance(heights: np.ndarray, resolution: float, start_ij: tuple[int, int],
+                  max_step: float, clearance: float = 0.4) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest walking distance from grid point start_ij = (iy, ix) over 8-neighbours whose
+    heights differ by at most ``max_step``; steps within ``clearance`` of an impassable edge cost
+    up to 3x. Returns (dist [ny, nx], inf where unreachable; parent move index [ny, nx])."""
+    h = np.asarray(heights, np.float64)
+    ny, nx = h.shape
+    moves = [(0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)]
+    # points next to an impassable 4-neighbour step, then grown to the clearance
+    block = np.zeros((ny, nx), bool)
+    bx = np.abs(np.diff(h, axis=1)) > max_step
+    by = np.abs(np.diff(h, axis=0)) > max_step
+    block[:, 1:] |= bx
+    block[:, :-1] |= bx
+    block[1:] |= by
+    block[:-1] |= by
+    near = np.zeros((ny, nx))
+    grown = block.copy()
+    steps = max(int(round(clearance / resolution)), 1)
+    for s in range(steps):
+        near[grown & (near == 0)] = 1.0 - s / steps
+        g = grown.copy()
+        g[1:] |= grown[:-1]
+        g[:-1] |= grown[1:]
+        g[:, 1:] |= grown[:, :-1]
+        g[:, :-1] |= grown[:, 1:]
+        grown = g
+    cost = resolution * (1.0 + 2.0 * near)
+    dist = np.full((ny, nx), np.inf)
+    parent = np.full((ny, nx), -1, np.int8)
+    dist[start_ij] = 0.0
+    while True:
+        changed = False
+        for m, (di, dj) in enumerate(moves):
+            dst = (slice(max(di, 0), ny + min(di, 0)), slice(max(dj, 0), nx + min(dj, 0)))
+            src = (slice(max(-di, 0), ny + min(-di, 0)), slice(max(-dj, 0), nx + min(-dj, 0)))
+            ok = np.abs(h[dst] - h[src]) <= max_step
+            if di and dj:  # diagonal: both axis neighbours must be passable too
+                ok &= np.abs(h[src[0], dst[1]] - h[src]) <= max_step
+                ok &= np.abs(h[dst[0], src[1]] - h[src]) <= max_step
+                ok &= np.abs(h[dst] - h[src[0], dst[1]]) <= max_step
+                ok &= np.abs(h[dst] - h[dst[0], src[1]]) <= max_step
+            step = np.hypot(di, dj) * 0.5 * (cost[dst] + cost[src])
+            cand = np.where(ok, dist[src] + step, np.inf)
+            better = cand < dist[dst] - 1e-12
+            if better.any():
+                dist[dst] = np.where(better, cand, dist[dst])
+                parent[dst] = np.where(better, m, parent[dst])
+                changed = True
+        if not changed:
+            return dist, parent
+
+
+def _trace(parent: np.ndarray, goal_ij: tuple[int, int]) -> np.ndarray:
+    """Follow parent moves back from goal_ij; returns [m, 2] (iy, ix) from start to goal."""
+    moves = [(0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)]
+    out = [goal_ij]
+    i, j = goal_ij
+    while parent[i, j] >= 0:
+        di, dj = moves[parent[i, j]]
+        i, j = i - di, j - dj
+        out.append((i, j))
+    return np.array(out[::-1])
+
+
+def _simplify(pts: np.ndarray, tol: float) -> np.ndarray:
+    """Ramer-Douglas-Peucker on [m, 2] points."""
+    if len(pts) < 3:
+        return pts
+    a, b = pts[0], pts[-1]
+    d = b - a
+    n = np.hypot(*d)
+    rel = pts - a
+    dist = (np.abs(d[0] * rel[:, 1] - d[1] * rel[:, 0]) / n if n > 0
+            else np.hypot(rel[:, 0], rel[:, 1]))
+    k = int(np.argmax(dist))
+    if dist[k] <= tol:
+        return np.array([a, b])
+    return np.concatenate([_simplify(pts[:k + 1], tol)[:-1], _simplify(pts[k:], tol)])
+
+
+def import_mesh(path: str | os.PathLike, start: tuple[float, float], goal: tuple[float, float],
+                resolution: float = 0.025, max_step: float = 0.25, ceiling: float = np.inf,
+                origin: tuple[float, float] | None = None) -> Tile:
+    """Ray-cast a staircase mesh into a Tile.
+
+    start, goal: (x, y) in the mesh's frame (z up). The grid covers the mesh footprint: its first
+    point is at ``origin`` (default: footprint corner + resolution / 2) and the tile frame is the
+    mesh frame shifted by it (``tile.spec['origin']``). Heights are quantised; points no ray hits
+    take the lowest hit height. The centre-line is the shortest path stepping at most
+    ``max_step`` between neighbours; everything that path search cannot reach is wall."""
+    path = os.fspath(path)
+    mesh = load_mesh(path)
+    lo, hi = mesh.bounds[0], mesh.bounds[1]
+    o = np.asarray(lo[:2] + resolution / 2 if origin is None else origin, np.float64)
+    nx = int(np.floor((hi[0] - o[0]) / resolution + 1e-6)) + 1
+    ny = int(np.floor((hi[1] - o[1]) / resolution + 1e-6)) + 1
+    if nx < 2 or ny < 2:
+        raise ValueError(f"{path}: footprint smaller than two grid points at {resolution} m")
+    xs, ys = o[0] + np.arange(nx) * resolution, o[1] + np.arange(ny) * resolution
+    h = raycast_down(mesh.vertices, mesh.faces, xs, ys, ceiling)
+    if np.isnan(h).all():
+        raise ValueError(f"{path}: no surface found under the grid (nothing below the ceiling?)")
+    h = quantise(np.where(np.isnan(h), np.nanmin(h), h))
+
+    def grid_index(p, name):
+        ij = (int(round((p[1] - o[1]) / resolution)), int(round((p[0] - o[0]) / resolution)))
+        if not (0 <= ij[0] < ny and 0 <= ij[1] < nx):
+            raise ValueError(f"{path}: {name} {tuple(p)} lies outside the mesh footprint")
+        return ij
+
+    s_ij, g_ij = grid_index(start, "start"), grid_index(goal, "goal")
+    dist, parent = walk_distance(h, resolution, s_ij, max_step)
+    if not np.isfinite(dist[g_ij]):
+        raise ValueError(f"{path}: goal {tuple(goal)} cannot be reached from start {tuple(start)} "
+                         f"stepping at most {max_step} m")
+    cells = _trace(parent, g_ij)[:, ::-1] * resolution          # [m, 2] tile-frame xy
+    s_xy, g_xy = np.asarray(start, float) - o, np.asarray(goal, float) - o
+    pts = _simplify(np.concatenate([[s_xy], cells[1:-1], [g_xy]]), resolution)
+    xy = resample([Line(tuple(p), tuple(q)) for p, q in zip(pts[:-1], pts[1:], strict=True)],
+                  CENTRELINE_POINTS)
+    z = sample_heights(h, resolution, xy[:, 0], xy[:, 1])
+    d0, d1 = pts[1] - pts[0], pts[-1] - pts[-2]
+    z_start, z_goal = float(h[s_ij]), float(h[g_ij])
+    half = _flat_half(h, resolution, s_ij)
+    spawn = [s_xy[0], s_xy[1], z_start, half, half, np.arctan2(d0[1], d0[0]), np.pi / 4]
+    return Tile(heights=h, resolution=resolution, spawn=spawn,
+                goal=[g_xy[0], g_xy[1], z_goal, np.arctan2(d1[1], d1[0])],
+                centreline=np.concatenate([xy, z[:, None]], 1), floor_height=z_start,
+                goal_height=z_goal, family="imported", level=0,
+                variant=os.path.splitext(os.path.basename(path))[0],
+                walls=~np.isfinite(dist),
+                spec=dict(source=path, origin=o.tolist(), max_step=max_step,
+                          path_length=float(dist[g_ij])))
+
+
+def _flat_half(h: np.ndarray, resolution: float, ij: tuple[int, int]) -> float:
+    """Largest half-size (m, <= 0.5) of a square around ij that is flat together with a
+    SPAWN_MARGIN border; 0 if none."""
+    i, j = ij
+    best = 0.0
+    for half in np.arange(resolution, 0.5 + 1e-9, resolution):
+        r = int(round((half + SPAWN_MARGIN) / resolution))
+        win = h[max(i - r, 0):i + r + 1, max(j - r, 0):j + r + 1]
+        if win.shape != (2 * r + 1, 2 * r + 1) or np.ptp(win) > 0:
+            break
+        best = float(half)
+    return best
