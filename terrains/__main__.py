@@ -120,7 +120,7 @@ def _load_npz_heights(path: str):
         t = Tile.load(path)
         return t.heights, t.resolution
     except ValueError as e:
-        if "not a tile file" not in str(e):
+        if "not a saved tile" not in str(e):
             raise
     at = Atlas.load(path)
     return at.heights, at.resolution

@@ -167,7 +167,7 @@ def load_npz(path: str | os.PathLike, kind: str, keys: tuple[str, ...]) -> dict[
         raise ValueError(f"{path}: not a readable {kind} file ({msg})") from None
     found = str(data.get("kind", ""))
     if found != kind:
-        raise ValueError(f"{path}: not a {kind} file (kind={found or 'missing'})")
+        raise ValueError(f"{path}: not a saved {kind} (kind={found or 'missing'})")
     missing = [k for k in keys if k not in data]
     if missing:
         raise ValueError(f"{path}: corrupt {kind} file, missing {', '.join(missing)}")

@@ -1,4 +1,4 @@
-"""Geometry of every family at every train and test level, measured on the height grid."""
+"""Geometry of every family at every train, test and extended level, measured on the grid."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from .measure import (
     walkable,
 )
 
-CASES = [(f, s, i, v) for f in terrains.FAMILIES for s in ("train", "test")
+CASES = [(f, s, i, v) for f in terrains.FAMILIES for s in ("train", "test", "extended")
          for i in range(len(terrains.levels(f, s))) for v in terrains.variants(f)]
 STAIRS = [c for c in CASES if c[0] != "pyramid"]
 
