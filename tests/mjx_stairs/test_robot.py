@@ -30,7 +30,9 @@ def _hold_pose(model: mujoco.MjModel, qpos0: np.ndarray, steps: int):
     target = jnp.asarray(rb.NOMINAL_JOINT_POS)
 
     def sub(d, _):
-        tau = rb.pd_torque(target, d.qpos[ids.qpos_joints], d.qvel[ids.qvel_joints], 35.0, 1.0, limit)
+        tau = rb.pd_torque(
+            target, d.qpos[ids.qpos_joints], d.qvel[ids.qvel_joints], 35.0, 1.0, limit
+        )
         d = mjx.step(mx, d.replace(ctrl=tau))
         return d, d.qpos
 
@@ -66,7 +68,9 @@ def test_joint_ranges_and_torque_limits_match_reference(flat_model):
         act = m.actuator(f"{leg}_{part}")
         assert act.trnid[0] == m.joint(name).id
         np.testing.assert_allclose(act.ctrlrange, [-REFERENCE_TORQUE[part], REFERENCE_TORQUE[part]])
-    np.testing.assert_allclose(rb.TORQUE_LIMIT, [REFERENCE_TORQUE[p.split("_")[1]] for p in rb.JOINT_NAMES])
+    np.testing.assert_allclose(
+        rb.TORQUE_LIMIT, [REFERENCE_TORQUE[p.split("_")[1]] for p in rb.JOINT_NAMES]
+    )
 
 
 def test_only_sphere_terrain_collisions(flat_model):
