@@ -126,13 +126,14 @@ def _load_npz_heights(path: str):
     return at.heights, at.resolution
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit status (errors: one line on stderr, 2)."""
     try:
-        sys.exit(run(argv))
+        return run(argv)
     except (ValueError, FileNotFoundError, OSError) as e:
         print(f"error: {str(e).splitlines()[0] if str(e) else type(e).__name__}", file=sys.stderr)
-        sys.exit(2)
+        return 2
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -58,3 +58,11 @@ def test_errors_are_one_line_exit_2(args, msg, tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2
     assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_main_returns_status(tmp_path, capsys):
+    from terrains.__main__ import main
+    assert main(["preview", "spiral", "--level", "2", "--resolution", "0.1",
+                 "--out", str(tmp_path / "s.png")]) == 0
+    assert main(["export", "u_shaped", "--level", "0", "--out", str(tmp_path / "u.glb")]) == 2
+    assert "--level 0 out of range" in capsys.readouterr().err
