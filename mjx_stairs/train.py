@@ -328,6 +328,10 @@ def reduce_chunk_metrics(per_iter: dict[str, jax.Array]) -> dict[str, jax.Array]
     out["episode/length"] = jnp.sum(per_iter["_ep/length_sum"]) / jnp.maximum(count, 1.0)
     out["episode/terminations"] = jnp.sum(per_iter["episode/terminations"])
     out["episode/truncations"] = jnp.sum(per_iter["episode/truncations"])
+    if "episode_success" in per_iter and "done" in per_iter:
+        # success rate of the episodes that ended in this chunk (both are means over T x B)
+        ended = jnp.sum(per_iter["done"])
+        out["success"] = jnp.sum(per_iter["episode_success"]) / jnp.maximum(ended, 1e-9)
     return out
 
 
@@ -448,6 +452,21 @@ def save_policy(path: str | Path, state: TrainState, config, layout: ObsLayout) 
         "action_size": int(tree["params"]["log_std"].shape[0]),
     }
     checkpoint.save(path, tree, meta)
+
+
+def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer) -> TrainState:
+    """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
+    starts from stage 1). The Adam moments, RNG and counters stay fresh."""
+    policy = load_policy(path)
+    want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
+    got = jax.tree_util.tree_map(jnp.shape, (policy.params, policy.normalizer))
+    if want != got:
+        raise checkpoint.CheckpointError(
+            f"{path}: policy shapes do not fit this experiment's network and observation layout"
+        )
+    params = jax.device_put(policy.params, trainer.sharding.params)
+    norm = jax.device_put(policy.normalizer, trainer.sharding.normalizer)
+    return state._replace(params=params, normalizer=norm)
 
 
 class Policy(NamedTuple):
@@ -590,6 +609,10 @@ def run(
         print(f"resumed {path} at iteration {meta['iteration']}", flush=True)
     else:
         state = trainer.init(jax.random.PRNGKey(tc.seed))
+        init_from = getattr(config, "init_from", "")
+        if init_from:
+            state = start_from_policy(state, init_from, trainer)
+            print(f"initialised params and normaliser from {init_from}", flush=True)
         (run_dir / "config.json").write_text(json.dumps(_config_dict(config), indent=2))
 
     t0 = time.time()
