@@ -39,13 +39,14 @@ ablation: $(SETUP)
 	$(PY) -m mjx_stairs train experiments/stage2_u_no_stall.toml $(ARGS)
 
 eval: $(SETUP)
-	$(PY) -m mjx_stairs eval $(ARGS)
+	$(PY) -m mjx_stairs eval --checkpoint experiments/results/stage2_u/policy.npz \
+	  --out experiments/results/eval $(ARGS)
 
 exp1: $(SETUP)
 	$(PY) -m mjx_stairs exp1 $(ARGS)
 
 transfer-matrix: $(SETUP)
-	@echo "transfer-matrix: not built yet (the transfer experiment has no issue landed)"; exit 2
+	$(PY) -m mjx_stairs transfer-matrix $(ARGS)
 
 bench: $(SETUP)
 	$(PY) -m mjx_stairs bench $(ARGS)

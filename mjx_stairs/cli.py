@@ -32,7 +32,48 @@ def cmd_train(args: argparse.Namespace) -> int:
             flush=True,
         )
     env = experiment.make_env(config)
-    train.run(config, env, run_dir=args.run_dir, resume=args.resume)
+    result = train.run(config, env, run_dir=args.run_dir, resume=args.resume)
+    if config.publish_dir:
+        experiment.publish(result.run_dir, config.publish_dir, result.record, result.stop_reason)
+        print(f"[mjx-stairs] published to {config.publish_dir}", flush=True)
+    return 0
+
+
+def cmd_exp1_report(args: argparse.Namespace) -> int:
+    from mjx_stairs import evaluate, exp1
+
+    spec = evaluate.EvalSpec(
+        robots_per_level=args.robots,
+        episode_length_s=args.episode_s,
+        seed=args.seed,
+        resolution=args.resolution,
+    )
+    exp1.report(args.stage2, args.out, args.ablation, spec)
+    return 0
+
+
+def cmd_exp1(args: argparse.Namespace) -> int:
+    from mjx_stairs import exp1
+
+    exp1.run_pipeline(force=args.force, robots=args.robots, overrides=tuple(args.overrides))
+    return 0
+
+
+def cmd_transfer(args: argparse.Namespace) -> int:
+    from mjx_stairs import evaluate, transfer
+
+    spec = evaluate.EvalSpec(
+        levels=tuple(lv - 1 for lv in args.levels),
+        robots_per_level=args.robots,
+        episode_length_s=args.episode_s,
+        seed=args.seed,
+        resolution=args.resolution,
+    )
+    if args.config is None:  # the whole experiment: train what is missing, then the matrix
+        transfer.run_pipeline(spec, force=args.force)
+        return 0
+    result = transfer.matrix(transfer.load_models(args.config), spec, args.out)
+    print(transfer.markdown(result), flush=True)
     return 0
 
 
@@ -137,6 +178,40 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--parts", default="physics,env,train")
     b.add_argument("--out", default=None, help="JSON path")
     b.set_defaults(fn=cmd_bench)
+
+    x = sub.add_parser("exp1-report", help="the paper's EXP1: Fig. 2, stall ablation, Fig. 4")
+    x.add_argument("--stage2", required=True, help="stage-2 policy.npz")
+    x.add_argument(
+        "--ablation", default=None, help="stage-2 policy trained without the stall penalty"
+    )
+    x.add_argument("--robots", type=int, default=1000, help="robots per level")
+    x.add_argument("--episode-s", type=float, default=20.0)
+    x.add_argument("--seed", type=int, default=0)
+    x.add_argument("--resolution", type=float, default=0.025)
+    x.add_argument("--out", required=True, help="output directory")
+    x.set_defaults(fn=cmd_exp1_report)
+
+    p1 = sub.add_parser("exp1", help="main job: stage 1, stage 2, ablation, EXP1 report")
+    p1.add_argument("overrides", nargs="*", help="key.sub=value overrides for every stage")
+    p1.add_argument("--force", action="store_true", help="retrain stages already published")
+    p1.add_argument("--robots", type=int, default=None, help="robots per level in the report")
+    p1.set_defaults(fn=cmd_exp1)
+
+    m = sub.add_parser("transfer-matrix", help="every model on every stair family (Tables 1-2)")
+    m.add_argument(
+        "--config",
+        default=None,
+        help="TOML with a [models] table (e.g. experiments/transfer_matrix.toml); "
+        "without it, train the missing models first",
+    )
+    m.add_argument("--force", action="store_true", help="retrain models already published")
+    m.add_argument("--levels", type=_csv_ints, default=(3, 4), help="1-based test levels")
+    m.add_argument("--robots", type=int, default=1000)
+    m.add_argument("--episode-s", type=float, default=20.0)
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--resolution", type=float, default=0.025)
+    m.add_argument("--out", default="experiments/results/transfer")
+    m.set_defaults(fn=cmd_transfer)
 
     tr = sub.add_parser("terrain", help="the terrains CLI (preview, export, import)")
     tr.add_argument("rest", nargs=argparse.REMAINDER)

@@ -51,6 +51,9 @@ class ExperimentConfig:
     init_from: str = field(
         default="", metadata={"help": "policy file whose params and normaliser start this run"}
     )
+    publish_dir: str = field(
+        default="", metadata={"help": "copy policy, metrics, config and run facts here at the end"}
+    )
 
 
 def load(path: str | Path | None, overrides: Iterable[str] = (), cpu: bool | None = None):
@@ -110,6 +113,42 @@ def build_atlas(terrain: TerrainConfig):
 def make_env(config: ExperimentConfig) -> StairEnv:
     """Atlas + env of an experiment."""
     return StairEnv(build_atlas(config.terrain), config.env)
+
+
+def publish(run_dir: str | Path, dest: str | Path, record: dict[str, Any], stop: str) -> None:
+    """Copy a run's policy, metrics and config to `dest` and write run.json (hardware, wall
+    time, env steps, steps/s). Each file is written through a temporary name and a rename."""
+    import json
+    import os
+    import platform
+    import shutil
+
+    run_dir, dest = Path(run_dir), Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in ("policy.npz", "metrics.jsonl", "config.json"):
+        tmp = dest / f".{name}.tmp"
+        shutil.copyfile(run_dir / name, tmp)
+        os.replace(tmp, dest / name)
+    rows = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    rates = [r["perf/steps_per_s"] for r in rows[1:]] or [r["perf/steps_per_s"] for r in rows]
+    facts = {
+        "run_dir": str(run_dir),
+        "device": jax.devices()[0].device_kind,
+        "devices": len(jax.devices()),
+        "backend": jax.default_backend(),
+        "host": platform.node(),
+        "jax": jax.__version__,
+        "iterations": record.get("iteration"),
+        "env_steps": record.get("env_steps"),
+        "wall_time_s": record.get("wall_time"),
+        "compile_s": record.get("perf/compile_s"),
+        "steps_per_s_median": sorted(rates)[len(rates) // 2] if rates else None,
+        "stop_reason": stop,
+        "final": {k: record.get(k) for k in ("episode/return", "level", "at_top", "success")},
+    }
+    tmp = dest / ".run.json.tmp"
+    tmp.write_text(json.dumps(facts, indent=2))
+    os.replace(tmp, dest / "run.json")
 
 
 def _flatten(table: dict, prefix: str = ""):
