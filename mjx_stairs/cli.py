@@ -34,7 +34,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     env = experiment.make_env(config)
     result = train.run(config, env, run_dir=args.run_dir, resume=args.resume)
     if config.publish_dir:
-        experiment.publish(result.run_dir, config.publish_dir, result.record, result.stop_reason)
+        experiment.publish(result.run_dir, config.publish_dir, result.metrics, result.stop_reason)
         print(f"[mjx-stairs] published to {config.publish_dir}", flush=True)
     return 0
 

@@ -507,6 +507,47 @@ class StairEnv(Env):
         )
         return State(data, obs, reward, done_f, metrics, info)
 
+    # ------------------------------------------------------------------ compact state
+
+    def pack_state(self, state: State) -> dict[str, Any]:
+        """The part of a State that a resume needs (~2.4 kB per robot instead of ~53 kB).
+
+        MJX recomputes every derived field of mjx.Data (kinematics, contacts, constraint rows)
+        from qpos, qvel, ctrl and the solver's warm start at the next step, and the critic's
+        observation is a function of qpos, qvel and info; only the actor's noisy observation and
+        the counters must be kept. `unpack_state` rebuilds the rest.
+        """
+        d = state.pipeline_state
+        info = {k: v for k, v in state.info.items() if k != "final_obs"}
+        return {
+            "qpos": d.qpos,
+            "qvel": d.qvel,
+            "qacc_warmstart": d.qacc_warmstart,
+            "ctrl": d.ctrl,
+            "time": d.time,
+            "obs": state.obs["state"],
+            "reward": state.reward,
+            "done": state.done,
+            "metrics": state.metrics,
+            "info": info,
+        }
+
+    def unpack_state(self, packed: dict[str, Any]) -> State:
+        """A State from `pack_state`'s output; stepping it matches stepping the original up to
+        float rounding of the recomputed critic observation."""
+        data = mjx.make_data(self._mx).replace(
+            qpos=packed["qpos"],
+            qvel=packed["qvel"],
+            qacc_warmstart=packed["qacc_warmstart"],
+            ctrl=packed["ctrl"],
+            time=packed["time"],
+        )
+        info = dict(packed["info"])
+        clean = self._observe(data.qpos, data.qvel, info, None)["privileged_state"]
+        obs = {"state": packed["obs"], "privileged_state": clean}
+        info["final_obs"] = obs
+        return State(data, obs, packed["reward"], packed["done"], dict(packed["metrics"]), info)
+
     # ------------------------------------------------------------------ pieces
 
     def _robot_model(self, info: dict) -> mjx.Model:
@@ -539,9 +580,10 @@ class StairEnv(Env):
         }
 
     def _observe(
-        self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict, rng: jax.Array
+        self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict, rng: jax.Array | None
     ) -> dict[str, jnp.ndarray]:
-        """Actor (noisy) and critic (clean) observations [49 + 441] from qpos/qvel alone."""
+        """Actor (noisy) and critic (clean) observations [49 + 441] from qpos/qvel alone; with
+        `rng` None both are clean."""
         pos, rot = qpos[:3], quat_to_mat(qpos[3:7])
         yaw = jnp.arctan2(rot[1, 0], rot[0, 0])
         goal = self._goal[info["tile"]]
@@ -557,7 +599,7 @@ class StairEnv(Env):
         }
         clean = jnp.concatenate(list(parts.values()))
         n = self.config.noise
-        if not n.enabled:
+        if not n.enabled or rng is None:
             return {"state": clean, "privileged_state": clean}
         scale = {
             "lin_vel": n.lin_vel,

@@ -105,7 +105,7 @@ def run_pipeline(
             continue
         print(f"[exp1] {name}: training{' (CPU preset)' if cpu else ''}", flush=True)
         result = train.run(config, experiment.make_env(config))
-        experiment.publish(result.run_dir, dest, result.record, result.stop_reason)
+        experiment.publish(result.run_dir, dest, result.metrics, result.stop_reason)
     out = published["stage2_u"].parent.parent / "exp1"
     n = robots or (8 if cpu else 1000)
     spec = evaluate.EvalSpec(robots_per_level=n, resolution=0.05 if cpu else 0.025)

@@ -135,7 +135,7 @@ def run_pipeline(spec: evaluate.EvalSpec, force: bool = False) -> dict[str, Any]
         if not (dest / "policy.npz").exists() or force:
             print(f"[transfer] {name}: training{' (CPU preset)' if cpu else ''}", flush=True)
             result = train.run(config, experiment.make_env(config))
-            experiment.publish(result.run_dir, dest, result.record, result.stop_reason)
+            experiment.publish(result.run_dir, dest, result.metrics, result.stop_reason)
         if name != "stage1":
             family = config.terrain.families[0]
             models[family] = str(dest / "policy.npz")

@@ -264,3 +264,27 @@ def test_tile_table_keeps_family_columns():
     assert set(tiles.tolist()) == {7, 8, 9}
     with pytest.raises(ValueError, match="no column"):
         cur.TileTable(np.zeros(4, int), cols=2, num_families=2)
+
+
+def test_packed_state_resumes_the_same_trajectory(env, fns):
+    state = _reset(env, fns, [1] * B, seed=5)
+    rng = jax.random.PRNGKey(2)
+    for _ in range(5):
+        rng, k = jax.random.split(rng)
+        state = fns["step"](state, jax.random.uniform(k, (B, 12), minval=-1, maxval=1))
+    packed = jax.jit(jax.vmap(env.pack_state))(state)
+    size = sum(np.asarray(x).nbytes for x in jax.tree_util.tree_leaves(packed)) / B
+    full = sum(np.asarray(x).nbytes for x in jax.tree_util.tree_leaves(state)) / B
+    assert size < full / 10
+    restored = jax.jit(jax.vmap(env.unpack_state))(packed)
+    np.testing.assert_allclose(
+        np.asarray(restored.obs["privileged_state"]), np.asarray(state.obs["privileged_state"]),
+        atol=1e-5,
+    )
+    a = jax.random.uniform(rng, (B, 12), minval=-1, maxval=1)
+    for _ in range(3):
+        state, restored = fns["step"](state, a), fns["step"](restored, a)
+    np.testing.assert_allclose(
+        np.asarray(restored.pipeline_state.qpos), np.asarray(state.pipeline_state.qpos), atol=1e-4
+    )
+    np.testing.assert_allclose(np.asarray(restored.reward), np.asarray(state.reward), atol=1e-4)
