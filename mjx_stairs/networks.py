@@ -90,29 +90,49 @@ class ObsLayout:
 # ----------------------------------------------------------------------------- init
 
 
-def _dense_init(rng: jax.Array, n_in: int, n_out: int, gain: float, kind: str) -> Params:
-    if kind == "orthogonal":
-        w = jax.nn.initializers.orthogonal(scale=gain)(rng, (n_in, n_out), jnp.float32)
-    elif kind == "lecun":
-        w = gain * jax.random.normal(rng, (n_in, n_out), jnp.float32) / math.sqrt(n_in)
-    else:
+def _gram_schmidt(a: jax.Array, m: jax.Array) -> jax.Array:
+    """Orthonormalise the first ``m`` columns of ``a`` [N, M] (zero-padded rows are harmless,
+    columns from ``m`` on come out zero). Classical Gram-Schmidt, applied twice for stability."""
+    cols = jnp.arange(a.shape[1])
+
+    def body(j, q):
+        qm = q * (cols < j)
+        v = a[:, j]
+        v = v - qm @ (qm.T @ v)
+        v = v - qm @ (qm.T @ v)
+        v = jnp.where(j < m, v / jnp.maximum(jnp.linalg.norm(v), 1e-12), 0.0)
+        return q.at[:, j].set(v)
+
+    return jax.lax.fori_loop(0, a.shape[1], body, jnp.zeros_like(a))
+
+
+def _init_weights(rng: jax.Array, specs: list[tuple[int, int, float]], kind: str) -> list:
+    """Weights [n_in, n_out] * gain for each (n_in, n_out, gain).
+
+    One Gaussian draw and one (vmapped) Gram-Schmidt loop for all layers: every separate
+    jax.random call or loop costs its own compile on the CPU. Orthogonal init orthonormalises
+    the shorter side (same Haar distribution as QR with the sign fix); 'lecun' scales the
+    Gaussian by 1/sqrt(n_in).
+    """
+    if kind not in ("orthogonal", "lecun"):
         raise ValueError(f"network.init: unknown init '{kind}' (expected 'orthogonal' or 'lecun')")
-    return {"w": w, "b": jnp.zeros((n_out,), jnp.float32)}
-
-
-def _conv_init(rng: jax.Array, c_in: int, c_out: int, gain: float, kind: str) -> Params:
-    fan_in = 9 * c_in
-    flat = _dense_init(rng, fan_in, c_out, gain, kind)
-    return {"w": flat["w"].reshape(3, 3, c_in, c_out), "b": flat["b"]}
-
-
-def _mlp_init(rng, sizes: list[int], out_gain: float, kind: str) -> list[Params]:
-    keys = jax.random.split(rng, len(sizes) - 1)
-    layers = []
-    for i, (k, n_in, n_out) in enumerate(zip(keys, sizes[:-1], sizes[1:], strict=True)):
-        last = i == len(sizes) - 2
-        layers.append(_dense_init(k, n_in, n_out, out_gain if last else math.sqrt(2.0), kind))
-    return layers
+    big = max(max(a, b) for a, b, _ in specs)
+    small = max(min(a, b) for a, b, _ in specs)
+    noise = jax.random.normal(rng, (len(specs), big, small), jnp.float32)
+    if kind == "orthogonal":
+        ms = jnp.array([min(a, b) for a, b, _ in specs])
+        rows = jnp.arange(big)[None, :, None]
+        ns = jnp.array([max(a, b) for a, b, _ in specs])[:, None, None]
+        q = jax.vmap(_gram_schmidt)(jnp.where(rows < ns, noise, 0.0), ms)
+    out = []
+    for i, (n_in, n_out, gain) in enumerate(specs):
+        n, m = max(n_in, n_out), min(n_in, n_out)
+        if kind == "orthogonal":
+            w = q[i, :n, :m] if n_in >= n_out else q[i, :n, :m].T
+        else:
+            w = noise[i, :n, :m].reshape(n_in, n_out) / math.sqrt(n_in)
+        out.append(gain * w)
+    return out
 
 
 def _pooled_shape(map_shape: tuple[int, ...], n_conv: int) -> tuple[int, int]:
@@ -129,30 +149,49 @@ def init_params(
     map_shape: tuple[int, ...],
     action_size: int,
 ) -> Params:
-    """Fresh actor-critic params; shapes in the module docstring."""
+    """Fresh actor-critic params; shapes in the module docstring.
+
+    Orthogonal init (rsl_rl / CleanRL style): gain sqrt(2) for hidden layers and convs (as
+    [9 C_in, C_out] matrices), 0.01 for the actor output, 1 for the critic output; zero biases.
+    """
     map_shape = tuple(map_shape)
-    k_enc, k_proj, k_actor, k_critic = jax.random.split(rng, 4)
-    params: Params = {}
+    relu_gain = math.sqrt(2.0)
+    specs: list[tuple[int, int, float]] = []
+    chans = (1, *cfg.conv_channels)
     if map_shape:
         if len(map_shape) != 2:
             raise ValueError(f"map_shape must be () or (h, w), got {map_shape}")
         h, w = _pooled_shape(map_shape, len(cfg.conv_channels))
         if h < 1 or w < 1:
             raise ValueError(f"map {map_shape} too small for {len(cfg.conv_channels)} conv layers")
-        chans = (1, *cfg.conv_channels)
-        conv_keys = jax.random.split(k_enc, len(cfg.conv_channels))
-        conv = [
-            _conv_init(k, c_in, c_out, math.sqrt(2.0), cfg.init)
-            for k, c_in, c_out in zip(conv_keys, chans[:-1], chans[1:], strict=True)
-        ]
-        n_flat = cfg.pool_size * cfg.pool_size * chans[-1]
-        proj = _dense_init(k_proj, n_flat, cfg.latent_size, math.sqrt(2.0), cfg.init)
-        params["encoder"] = {"conv": conv, "proj": proj}
+        specs += [(9 * c_in, c_out, relu_gain) for c_in, c_out in zip(chans[:-1], chans[1:],
+                                                                       strict=True)]
+        specs.append((cfg.pool_size * cfg.pool_size * chans[-1], cfg.latent_size, relu_gain))
         n_feat = cfg.latent_size + n_vec
     else:
         n_feat = n_vec
-    params["actor"] = _mlp_init(k_actor, [n_feat, *cfg.actor_hidden, action_size], 0.01, cfg.init)
-    params["critic"] = _mlp_init(k_critic, [n_feat, *cfg.critic_hidden, 1], 1.0, cfg.init)
+    mlps = {}
+    for name, hidden, n_out, out_gain in (("actor", cfg.actor_hidden, action_size, 0.01),
+                                          ("critic", cfg.critic_hidden, 1, 1.0)):
+        sizes = [n_feat, *hidden, n_out]
+        mlps[name] = len(specs)
+        specs += [(a, b, out_gain if i == len(sizes) - 2 else relu_gain)
+                  for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True))]
+    ws = _init_weights(rng, specs, cfg.init)
+
+    def dense(i):
+        return {"w": ws[i], "b": jnp.zeros((specs[i][1],), jnp.float32)}
+
+    params: Params = {}
+    if map_shape:
+        n_conv = len(cfg.conv_channels)
+        conv = []
+        for i, (c_in, c_out) in enumerate(zip(chans[:-1], chans[1:], strict=True)):
+            d = dense(i)
+            conv.append({"w": d["w"].reshape(3, 3, c_in, c_out), "b": d["b"]})
+        params["encoder"] = {"conv": conv, "proj": dense(n_conv)}
+    params["actor"] = [dense(i) for i in range(mlps["actor"], mlps["critic"])]
+    params["critic"] = [dense(i) for i in range(mlps["critic"], len(specs))]
     params["log_std"] = jnp.full((action_size,), math.log(cfg.init_std), jnp.float32)
     return params
 

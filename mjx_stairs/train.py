@@ -369,10 +369,39 @@ def _check(config, mesh: Mesh) -> None:
         raise ValueError(f"ppo.lr_schedule must be 'adaptive' or 'fixed', not {pc.lr_schedule!r}")
 
 
+_TRAINERS: dict[tuple, tuple[Any, Trainer]] = {}
+
+
+def _compiled_config(config) -> LearnerConfig:
+    """The part of a config the compiled functions depend on (host-only fields dropped)."""
+    tc = config.train
+    return LearnerConfig(
+        ppo=config.ppo,
+        network=config.network,
+        train=TrainConfig(num_envs=tc.num_envs, unroll_length=tc.unroll_length,
+                          iterations_per_chunk=tc.iterations_per_chunk),
+    )
+
+
 def build_trainer(config, env, mesh: Mesh | None = None) -> Trainer:
-    """make_train plus what the host loop needs (layout, mesh, shardings, state template)."""
+    """make_train plus what the host loop needs (layout, mesh, shardings, state template).
+
+    Trainers are cached per (compile-relevant config, env object, devices), so repeated
+    ``run`` calls in one process (tests, resume) reuse the compiled chunk.
+    """
     mesh = make_mesh() if mesh is None else mesh
     _check(config, mesh)
+    config = _compiled_config(config)
+    key = (config, id(env), tuple(d.id for d in mesh.devices.flat))
+    hit = _TRAINERS.get(key)
+    if hit is not None and hit[0] is env:
+        return hit[1]
+    trainer = _build_trainer(config, env, mesh)
+    _TRAINERS[key] = (env, trainer)
+    return trainer
+
+
+def _build_trainer(config, env, mesh: Mesh) -> Trainer:
     layout = obs_layout(env)
     init_fn = functools.partial(init_state, config=config, env=env, layout=layout)
     template = jax.eval_shape(init_fn, jax.random.PRNGKey(0))
@@ -517,6 +546,18 @@ def policy_value(policy: Policy, critic_obs: jax.Array) -> jax.Array:
 # ----------------------------------------------------------------------------- host loop
 
 
+_COMPILED: dict[int, Any] = {}
+
+
+def _compiled_chunk(trainer: Trainer, state: TrainState):
+    """AOT-compiled chunk (so the first chunk's timing excludes compilation), cached."""
+    hit = _COMPILED.get(id(trainer))
+    if hit is None or hit[0] is not trainer:
+        hit = (trainer, trainer.chunk.lower(state).compile())
+        _COMPILED[id(trainer)] = hit
+    return hit[1]
+
+
 class RunResult(NamedTuple):
     run_dir: Path
     state: TrainState
@@ -616,7 +657,7 @@ def run(
         (run_dir / "config.json").write_text(json.dumps(_config_dict(config), indent=2))
 
     t0 = time.time()
-    compiled = trainer.chunk.lower(state).compile()
+    compiled = _compiled_chunk(trainer, state)
     compile_s = time.time() - t0
 
     iteration = int(jax.device_get(state.iteration))

@@ -1,0 +1,132 @@
+"""Config loader: TOML + overrides, type checks, clear errors, JSON round trip."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Literal
+
+import pytest
+
+from mjx_stairs.config import (
+    ConfigError,
+    apply_overrides,
+    describe,
+    from_dict,
+    from_json,
+    load_config,
+    parse_value,
+    to_dict,
+    to_json,
+)
+from mjx_stairs.train import LearnerConfig
+
+
+@dataclass(frozen=True)
+class Inner:
+    rate: float = field(default=0.5, metadata={"help": "a rate"})
+    sizes: tuple[int, ...] = (1, 2)
+    mode: Literal["a", "b"] = "a"
+
+
+@dataclass(frozen=True)
+class Outer:
+    name: str = "x"
+    count: int = 3
+    flag: bool = False
+    limit: int | None = None
+    inner: Inner = field(default_factory=Inner)
+    custom: Inner = field(default_factory=lambda: Inner(rate=2.0))
+
+
+def test_defaults_and_toml_file(tmp_path):
+    p = tmp_path / "exp.toml"
+    p.write_text('name = "run"\n[inner]\nrate = 1\nsizes = [4, 5, 6]\n')
+    cfg = load_config(Outer, p)
+    assert cfg == Outer(name="run", inner=Inner(rate=1.0, sizes=(4, 5, 6)))
+    assert isinstance(cfg.inner.rate, float)
+    hash(cfg)  # frozen and hashable: usable as a static jit argument
+
+
+def test_overrides_parse_toml_literals_and_bare_strings(tmp_path):
+    p = tmp_path / "exp.toml"
+    p.write_text("count = 1\n")
+    cfg = load_config(
+        Outer, p,
+        ["count=7", "flag=true", "name=stage1_run", "inner.sizes=[8, 16]", "inner.mode=b",
+         "limit=10", 'custom.rate=3e-4'],
+    )
+    assert cfg.count == 7 and cfg.flag is True and cfg.name == "stage1_run"
+    assert cfg.inner.sizes == (8, 16) and cfg.inner.mode == "b" and cfg.limit == 10
+    # a partial table keeps the non-default default of the nested field
+    assert cfg.custom == Inner(rate=3e-4)
+    assert load_config(Outer, None, ["limit=none"]).limit is None
+    assert parse_value("1e-3") == 1e-3 and parse_value("abc") == "abc"
+    assert parse_value('"quoted"') == "quoted"
+
+
+def test_partial_nested_table_keeps_parent_default():
+    cfg = from_dict(Outer, {"custom": {"sizes": [9]}})
+    assert cfg.custom == Inner(rate=2.0, sizes=(9,))
+
+
+@pytest.mark.parametrize(
+    "override, fragment",
+    [
+        ("inner.rte=1.0", "unknown config key 'inner.rte'"),
+        ("nope=1", "unknown config key 'nope'"),
+        ("count=1.5", "config key 'count': expected int, got float 1.5"),
+        ("count=true", "config key 'count': expected int"),
+        ("flag=1", "config key 'flag': expected bool"),
+        ("inner.rate=fast", "config key 'inner.rate': expected float, got str 'fast'"),
+        ("inner.sizes=[1, 2.5]", "config key 'inner.sizes[1]': expected int"),
+        ("inner.mode=c", "config key 'inner.mode': expected one of ['a', 'b']"),
+        ("inner=3", "config key 'inner': expected Inner"),
+    ],
+)
+def test_bad_values_name_the_key_and_type(override, fragment):
+    with pytest.raises(ConfigError) as e:
+        load_config(Outer, None, [override])
+    assert fragment in str(e.value)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        load_config(Outer, tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("count = = 2\n")
+    with pytest.raises(ConfigError, match="bad.toml: invalid TOML"):
+        load_config(Outer, bad)
+    typo = tmp_path / "typo.toml"
+    typo.write_text("[inner]\nrat = 2\n")
+    with pytest.raises(ConfigError, match=r"typo\.toml: unknown config key 'inner\.rat'"):
+        load_config(Outer, typo)
+    with pytest.raises(ConfigError, match="not of the form"):
+        apply_overrides({}, ["count"])
+
+
+def test_json_round_trip_of_the_learner_config():
+    cfg = load_config(LearnerConfig, None, ["ppo.learning_rate=3e-4", "network.actor_hidden=[64]",
+                                            "train.experiment=rt"])
+    d = to_dict(cfg)
+    assert d["network"]["actor_hidden"] == [64]
+    json.dumps(d)
+    assert from_json(LearnerConfig, to_json(cfg)) == cfg
+    assert from_dict(LearnerConfig, json.loads(json.dumps(d))) == cfg
+
+
+def test_learner_defaults_are_the_protocol():
+    cfg = LearnerConfig()
+    p, n, t = cfg.ppo, cfg.network, cfg.train
+    assert (t.unroll_length, p.learning_rate, p.desired_kl, p.num_epochs, p.num_minibatches) == (
+        24, 1e-3, 0.01, 5, 4)
+    assert (p.discount, p.gae_lambda, p.clip_eps, p.value_clip_eps) == (0.995, 0.995, 0.2, 0.2)
+    assert (p.entropy_coef, p.max_grad_norm, p.value_loss_coef) == (0.005, 1.0, 1.0)
+    assert n.conv_channels == (8, 16, 32) and n.latent_size == 128 and n.pool_size == 2
+    assert n.actor_hidden == n.critic_hidden == (128, 128, 64) and n.init_std == 0.8
+
+
+def test_describe_lists_every_leaf_with_help():
+    rows = {r[0]: r for r in describe(LearnerConfig)}
+    assert rows["ppo.learning_rate"][2] == 1e-3
+    assert all(r[3] for r in rows.values()), [k for k, r in rows.items() if not r[3]]
