@@ -179,8 +179,9 @@ def critic_map(
 
     At each grid point the robot stands upright at its nominal height above the terrain, faces
     along the nearest centre-line segment, velocities and last action zero; it sees the local
-    height map and the goal. Returns {"x": [nx], "y": [ny], "value": [ny, nx], "heights": tile
-    heights [ny_t, nx_t], "extent": (x0, x1, y0, y1), "goal": [4], "centreline": [K, 3]}.
+    height map and the goal. Points on walls are NaN.
+    Returns {"x": [nx], "y": [ny], "value": [ny, nx], "heights": tile heights
+    [ny_t, nx_t], "extent": (x0, x1, y0, y1), "goal": [4], "centreline": [K, 3]}.
     """
     spec = EvalSpec(
         family=family,
@@ -220,6 +221,10 @@ def critic_map(
         jnp.asarray(yaw, jnp.float32),
     )
     values = np.asarray(jax.jit(lambda o: policy_value(policy, o))(obs)).reshape(gx.shape)
+    # Walls are not walkable: leave them blank (above the goal landing by more than a riser).
+    ground = np.asarray(jax.jit(env.terrain_height)(jnp.asarray(gx), jnp.asarray(gy)))
+    goal_z = float(env._goal[tile][2])
+    values = np.where(ground > goal_z + 0.3, np.nan, values)
     n = int(round(tile_size / resolution))
     i0, j0 = int(round(oy / resolution)), int(round(ox / resolution))
     heights = np.asarray(env.robot.mj_model.hfield_data).reshape(env.atlas_shape)
