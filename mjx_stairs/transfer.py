@@ -68,10 +68,7 @@ def matrix(
                 policy, dataclasses.replace(spec, family=dst)
             )
     mean = {s: {d: float(np.mean(success[s][d]["success"])) for d in families} for s in families}
-    transfer = {
-        s: {d: (mean[s][d] / mean[d][d] if mean[d][d] > 0 else float("nan")) for d in families}
-        for s in families
-    }
+    transfer = transferability(mean)
     out = {
         "levels": [lv + 1 for lv in spec.levels],
         "models": models,
@@ -86,6 +83,15 @@ def matrix(
         evaluate.write_atomic(d / "transfer.json", json.dumps(out, indent=2))
         evaluate.write_atomic(d / "transfer.md", markdown(out))
     return out
+
+
+def transferability(mean: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
+    """S_model(stairs) / S_stairs-model(stairs) for every (model, stairs) pair of a square
+    {model: {stairs: mean success}} table; NaN where the stairs' own model never succeeds."""
+    return {
+        s: {d: (mean[s][d] / mean[d][d] if mean[d][d] > 0 else float("nan")) for d in row}
+        for s, row in mean.items()
+    }
 
 
 def markdown(result: dict[str, Any]) -> str:

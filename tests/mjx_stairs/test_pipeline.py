@@ -1,0 +1,119 @@
+"""End to end on the CPU: the real stair env trained for two iterations through the CLI, then
+evaluation, the EXP1 report, the transfer matrix and the bench on what it produced."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mjx_stairs import bench, cli, evaluate, exp1, experiment, transfer
+from mjx_stairs.train import load_policy
+
+TINY = evaluate.EvalSpec(levels=(0, 5), robots_per_level=2, episode_length_s=1.0, resolution=0.05)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    root = tmp_path_factory.mktemp("pipeline")
+    code = cli.main(
+        [
+            "train",
+            "experiments/stage1.toml",
+            "train.num_envs=16",
+            "train.total_iterations=2",
+            "train.iterations_per_chunk=1",
+            f"train.log_dir={root / 'runs'}",
+            f"publish_dir={root / 'stage1'}",
+            "train.progress=false",
+            "train.console=false",
+            "terrain.resolution=0.05",
+            "terrain.variants_per_family=1",
+            "terrain.levels=[0, 4]",
+        ]
+    )
+    assert code == 0
+    return root
+
+
+def test_stair_env_trains_two_iterations_with_16_robots(trained):
+    rows = [json.loads(x) for x in (trained / "stage1" / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [1, 2]
+    assert rows[-1]["env_steps"] == 2 * 16 * 24
+    for key in ("episode/return", "loss/value", "level", "reward/nav_coarse", "success"):
+        assert math.isfinite(rows[-1][key]), key
+    facts = json.loads((trained / "stage1" / "run.json").read_text())
+    assert facts["env_steps"] == 768 and facts["backend"] == "cpu"
+    policy = load_policy(trained / "stage1" / "policy.npz")
+    assert policy.layout.n_vec == 49 and policy.layout.map_shape == (21, 21)
+    assert policy.metadata["config"]["terrain"]["families"] == ["pyramid"]
+
+
+def test_eval_and_exp1_report(trained, tmp_path):
+    path = trained / "stage1" / "policy.npz"
+    results = evaluate.evaluate([path], ["u_shaped"], TINY, tmp_path / "eval")
+    r = results[0]
+    assert r["levels"] == [1, 6] and len(r["success"]) == 2
+    assert all(0.0 <= s <= 1.0 for s in r["success"] + r["fell"])
+    saved = json.loads((tmp_path / "eval" / "results.json").read_text())
+    assert saved[0]["success"] == r["success"]
+    assert "| u_shaped |" in (tmp_path / "eval" / "results.md").read_text()
+
+    summary = exp1.report(path, tmp_path / "exp1", spec=TINY)
+    assert (tmp_path / "exp1" / "fig2_u_success.png").stat().st_size > 5000
+    assert (tmp_path / "exp1" / "fig4_critic_u.png").stat().st_size > 5000
+    assert "paper (Table 1)" in (tmp_path / "exp1" / "exp1.md").read_text()
+    assert set(summary["results"]) == {"stage 2 (stall penalty)"}
+
+
+def test_critic_map_covers_the_tile_and_blanks_walls(trained):
+    m = evaluate.critic_map(
+        load_policy(trained / "stage1" / "policy.npz"), "u_shaped", 2, spacing=0.25, resolution=0.05
+    )
+    v = m["value"]
+    assert v.shape == (len(m["y"]), len(m["x"]))
+    walkable = np.isfinite(v)
+    assert 0.1 < walkable.mean() < 0.9  # the staircase is walkable, the walls around it are not
+    assert np.ptp(v[walkable]) > 0  # the critic sees different places differently
+
+
+def test_transfer_matrix_and_transferability(trained, tmp_path):
+    mean = {"u": {"u": 0.8, "s": 0.9}, "s": {"u": 0.02, "s": 0.95}}
+    t = transfer.transferability(mean)
+    assert t["u"]["s"] == pytest.approx(0.9 / 0.95) and t["s"]["u"] == pytest.approx(0.02 / 0.8)
+    assert math.isnan(transfer.transferability({"a": {"a": 0.0}})["a"]["a"])
+    path = str(trained / "stage1" / "policy.npz")
+    spec = evaluate.EvalSpec(levels=(2,), robots_per_level=2, episode_length_s=1.0, resolution=0.05)
+    result = transfer.matrix({"straight": path}, spec, tmp_path)
+    assert result["levels"] == [3]
+    assert "Transferability" in (tmp_path / "transfer.md").read_text()
+    with pytest.raises(Exception, match="unknown stair family"):
+        bad = tmp_path / "bad.toml"
+        bad.write_text('[models]\nzigzag = "x.npz"\n')
+        transfer.load_models(bad)
+
+
+def test_bench_measures_physics_and_env():
+    config, _ = experiment.load(
+        "experiments/stage2_u.toml",
+        [
+            "terrain.resolution=0.05",
+            "terrain.variants_per_family=1",
+            "terrain.levels=[0]",
+        ],
+        cpu=False,
+    )
+    out = bench.run_bench(config, [4], steps=2, repeats=1, parts=("physics", "env"))
+    row = out["results"][0]
+    assert row["physics"]["steps_per_s"] > 0 and row["env"]["steps_per_s"] > 0
+    assert out["contacts"] == 64  # 16 spheres x 4 heightfield contacts
+
+
+def test_cli_errors_are_one_line(capsys, tmp_path):
+    assert cli.main(["train", str(tmp_path / "missing.toml")]) == 2
+    assert "config file not found" in capsys.readouterr().err
+    assert cli.main(["train", "experiments/stage1.toml", "train.bogus=1"]) == 2
+    assert "train.bogus" in capsys.readouterr().err
+    assert cli.main(["eval", "--checkpoint", str(tmp_path / "none.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "none.npz" in err and len(err.strip().splitlines()) == 1
