@@ -82,6 +82,11 @@ class TrainConfig:
     keep_checkpoints: int = field(
         default=3, metadata={"help": "full checkpoints kept per run (0 = all)"}
     )
+    checkpoint_env: str = field(
+        default="full",
+        metadata={"help": "'full': the whole batched env state (bit-exact resume); 'packed': "
+                  "env.pack_state (~20x smaller; resume exact up to float rounding)"},
+    )
     tensorboard: bool = field(default=True, metadata={"help": "write TensorBoard scalars"})
     progress: bool = field(default=True, metadata={"help": "tqdm progress bar"})
     console: bool = field(default=True, metadata={"help": "print a metrics block per chunk"})
@@ -352,6 +357,7 @@ class Trainer(NamedTuple):
     mesh: Mesh
     sharding: TrainState  # shardings of the TrainState
     template: TrainState  # ShapeDtypeStructs of the TrainState
+    env: Any  # the env the trainer was built for
 
 
 def _check(config, mesh: Mesh) -> None:
@@ -365,6 +371,9 @@ def _check(config, mesh: Mesh) -> None:
             f"num_envs * unroll_length = {n} does not split into ppo.num_minibatches="
             f"{pc.num_minibatches}"
         )
+    if tc.checkpoint_env not in ("full", "packed"):
+        raise ValueError(f"train.checkpoint_env must be 'full' or 'packed', not "
+                         f"{tc.checkpoint_env!r}")
     if pc.lr_schedule not in ("adaptive", "fixed"):
         raise ValueError(f"ppo.lr_schedule must be 'adaptive' or 'fixed', not {pc.lr_schedule!r}")
 
@@ -411,7 +420,7 @@ def _build_trainer(config, env, mesh: Mesh) -> Trainer:
     chunk_fn = functools.partial(run_chunk, config=config, env=env, layout=layout, mesh=mesh)
     chunk = jax.jit(chunk_fn, in_shardings=(sharding,), out_shardings=(sharding, rep),
                     donate_argnums=0)
-    return Trainer(init, chunk, layout, mesh, sharding, template)
+    return Trainer(init, chunk, layout, mesh, sharding, template, env)
 
 
 def make_train(config, env, mesh: Mesh | None = None):
@@ -437,16 +446,40 @@ def _layout_dict(layout: ObsLayout) -> dict[str, Any]:
             "order": "[vec (n_vec) | map (row-major h*w)]"}
 
 
+_PACKERS: dict[int, tuple[Any, Callable, Callable]] = {}
+
+
+def _packers(env) -> tuple[Callable, Callable]:
+    """Jitted, batched ``env.pack_state`` / ``env.unpack_state`` (cached per env)."""
+    if not (hasattr(env, "pack_state") and hasattr(env, "unpack_state")):
+        raise ValueError("train.checkpoint_env='packed' needs env.pack_state and "
+                         "env.unpack_state")
+    hit = _PACKERS.get(id(env))
+    if hit is None or hit[0] is not env:
+        hit = (env, jax.jit(jax.vmap(env.pack_state)), jax.jit(jax.vmap(env.unpack_state)))
+        _PACKERS[id(env)] = hit
+    return hit[1], hit[2]
+
+
 def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
-               extra: dict | None = None) -> None:
-    """Full checkpoint: the whole TrainState + config and counters as metadata."""
+               extra: dict | None = None, env=None) -> None:
+    """Full checkpoint: the whole TrainState + config and counters as metadata.
+
+    With ``train.checkpoint_env == "packed"`` the env state is stored as
+    ``vmap(env.pack_state)`` (``env`` required) and rebuilt with ``env.unpack_state`` on load.
+    """
+    tc = config.train
+    env_format = tc.checkpoint_env
+    if env_format == "packed":
+        pack, _ = _packers(env)
+        state = state._replace(env_state=pack(state.env_state))
     host = jax.device_get(state)
     it = int(host.iteration)
-    tc = config.train
     meta = {
         "kind": "train_state",
         "iteration": it,
         "env_steps": it * tc.num_envs * tc.unroll_length,
+        "env_format": env_format,
         "config": _config_dict(config),
         "layout": _layout_dict(layout),
         "action_size": int(host.params["log_std"].shape[0]),
@@ -459,9 +492,20 @@ def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
 
 def load_state(path: str | Path, trainer: Trainer) -> tuple[TrainState, dict]:
     """Read a full checkpoint into the trainer's TrainState structure, placed on its mesh."""
-    host, meta = checkpoint.load(path, trainer.template)
+    meta = checkpoint.load_metadata(path)
     if meta.get("kind") != "train_state":
         raise checkpoint.CheckpointError(f"{path}: not a train-state checkpoint")
+    if meta.get("env_format", "full") == "packed":
+        pack, unpack = _packers(trainer.env)
+        packed_t = jax.eval_shape(pack, trainer.template.env_state)
+        host, meta = checkpoint.load(path, trainer.template._replace(env_state=packed_t))
+        bat = NamedSharding(trainer.mesh, P(BATCH_AXIS))
+        packed = jax.device_put(host.env_state, jax.tree_util.tree_map(lambda _: bat, packed_t))
+        env_state = jax.device_put(unpack(packed), trainer.sharding.env_state)
+        state = jax.device_put(host._replace(env_state=None),
+                               trainer.sharding._replace(env_state=None))
+        return state._replace(env_state=env_state), meta
+    host, meta = checkpoint.load(path, trainer.template)
     return jax.device_put(host, trainer.sharding), meta
 
 
@@ -607,15 +651,18 @@ def run(
     config,
     env,
     run_dir: str | Path | None = None,
-    resume: bool = False,
+    resume: bool | str | Path = False,
     on_chunk: Callable[[dict[str, Any]], bool | None] | None = None,
     mesh: Mesh | None = None,
 ) -> RunResult:
     """Train until ``train.total_iterations`` (rounded up to whole chunks), ``max_env_steps``,
     the ``time_budget_s`` or a signal; checkpoint and return.
 
-    run_dir: None -> a new ``<log_dir>/<experiment>__<seed>__<time>`` (or, with resume, the
-      newest such directory). resume: continue from the newest ``checkpoints/state_*.npz``.
+    run_dir: None -> a new ``<log_dir>/<experiment>__<seed>__<time>`` (or, with resume=True,
+      the newest such directory).
+    resume: True -> continue from the newest ``<run_dir>/checkpoints/state_*.npz``; a path ->
+      continue from that state file (e.g. one carried from another machine), logging into
+      ``run_dir`` (a new run directory when None).
     on_chunk(record): called after each chunk with the logged record; returning True stops.
     """
     t_start = time.time()
@@ -623,9 +670,10 @@ def run(
     trainer = build_trainer(config, env, mesh)
     steps_per_iter = tc.num_envs * tc.unroll_length
     K = tc.iterations_per_chunk
+    resume_file = None if isinstance(resume, bool) else Path(resume)
 
     if run_dir is None:
-        if resume:
+        if resume is True:
             run_dir = logging_utils.latest_run_dir(tc.log_dir, tc.experiment, tc.seed)
             if run_dir is None:
                 raise FileNotFoundError(
@@ -638,7 +686,7 @@ def run(
     ckpt_dir = run_dir / "checkpoints"
 
     if resume:
-        path = checkpoint.latest_checkpoint(ckpt_dir)
+        path = resume_file if resume_file is not None else checkpoint.latest_checkpoint(ckpt_dir)
         if path is None:
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
         state, meta = load_state(path, trainer)
@@ -675,13 +723,14 @@ def run(
     chunk_s_est = 0.0
     save_s_est = 0.0
     chunks_since_ckpt = 0
-    saved_iteration = iteration if resume else -1
+    saved_iteration = iteration if resume is True else -1
 
     def checkpoint_now(st: TrainState) -> None:
         nonlocal save_s_est, saved_iteration
         t = time.time()
         it = int(jax.device_get(st.iteration))
-        save_state(checkpoint.checkpoint_path(ckpt_dir, it), st, config, trainer.layout)
+        save_state(checkpoint.checkpoint_path(ckpt_dir, it), st, config, trainer.layout,
+                   env=trainer.env)
         save_policy(run_dir / "policy.npz", st, config, trainer.layout)
         checkpoint.prune(ckpt_dir, tc.keep_checkpoints)
         save_s_est = max(save_s_est, time.time() - t)

@@ -92,6 +92,21 @@ class PointReach(Env):
                    "level": jnp.linalg.norm(phys["goal"])}
         return state.replace(obs=obs, reward=reward, done=done, metrics=metrics, info=info)
 
+    # --- compact checkpoints (same contract as the stair env) ------------------------------
+    def pack_state(self, state: State) -> dict:
+        """Drop what can be recomputed: the clean obs and final_obs."""
+        info = {k: v for k, v in state.info.items() if k != "final_obs"}
+        return {"obs": state.obs["state"], "reward": state.reward, "done": state.done,
+                "metrics": state.metrics, "info": info}
+
+    def unpack_state(self, packed: dict) -> State:
+        info = dict(packed["info"])
+        clean = self._obs(info["phys"], jax.random.PRNGKey(0))["privileged_state"]
+        obs = {"state": packed["obs"], "privileged_state": clean}
+        info["final_obs"] = obs
+        return State(pipeline_state=None, obs=obs, reward=packed["reward"], done=packed["done"],
+                     metrics=dict(packed["metrics"]), info=info)
+
     # --- internals ----------------------------------------------------------------------
     def _sample(self, rng: jax.Array) -> dict:
         k1, k2 = jax.random.split(rng)
