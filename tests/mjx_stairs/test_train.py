@@ -236,25 +236,3 @@ def test_two_host_devices_match_one():
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "OK max param diff" in proc.stdout
 
-
-# ----------------------------------------------------------------------------- stair env
-
-
-def test_stair_env_two_iterations_16_robots(tmp_path):
-    """The real env end to end on the CPU: 16 robots, one chunk of 2 iterations, logs,
-    checkpoint and policy file."""
-    experiment = pytest.importorskip("mjx_stairs.experiment")
-    cfg, _ = experiment.load(ROOT / "experiments" / "stage1.toml", [
-        "train.num_envs=16", "train.unroll_length=8", "train.iterations_per_chunk=2",
-        "train.total_iterations=2", "terrain.resolution=0.05", "terrain.variants_per_family=1",
-        "train.progress=false", "train.console=false", f"train.log_dir={tmp_path}",
-    ], cpu=False)
-    env = experiment.make_env(cfg)
-    result = train.run(cfg, env)
-    assert result.stop_reason == "total_iterations" and int(result.state.iteration) == 2
-    rec = result.metrics
-    assert rec["env_steps"] == 2 * 16 * 8
-    assert any(k.startswith("reward/") for k in rec) and "level" in rec
-    assert all(np.isfinite(v) for v in rec.values() if isinstance(v, float))
-    policy = train.load_policy(result.run_dir / "policy.npz")
-    assert policy.layout == train.ObsLayout(49, (21, 21)) and policy.action_size == 12
