@@ -130,9 +130,48 @@ def cmd_terrain(args: argparse.Namespace) -> int:
     return int(terrains_main(args.rest) or 0)
 
 
-def cmd_not_yet(args: argparse.Namespace) -> int:
-    print(f"mjx-stairs {args.command}: not built yet", file=sys.stderr)
-    return 2
+def cmd_play(args: argparse.Namespace) -> int:
+    from mjx_stairs import play
+
+    spec = play.PlaySpec(
+        family=args.family,
+        level=args.level - 1,
+        schedule=args.schedule,
+        robots=args.robots,
+        seconds=args.seconds,
+        seed=args.seed,
+        episode_length_s=args.episode_s,
+        resolution=args.resolution,
+    )
+    try:
+        play.play(args.checkpoint, spec, video=args.video, mcap=args.mcap, width=args.width,
+                  height=args.height, fps=args.fps)
+    except play.RenderError as e:
+        print(f"mjx-stairs play: error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from mjx_stairs import export
+    from mjx_stairs.train import load_policy
+
+    try:
+        policy = load_policy(args.checkpoint)
+        export.export_policy(policy, args.onnx)
+        print(f"wrote {args.onnx} and {export.sidecar_path(args.onnx)}", flush=True)
+        if args.verify:
+            err = export.verify(policy, args.onnx)
+            print(f"onnxruntime vs JAX on 64 random observations: max |diff| = {err:.2e}",
+                  flush=True)
+            if err > 1e-5:
+                print("mjx-stairs export: error: the ONNX graph does not match the policy",
+                      file=sys.stderr)
+                return 1
+    except export.ExportError as e:
+        print(f"mjx-stairs export: error: {e}", file=sys.stderr)
+        return 2
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -217,10 +256,29 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("rest", nargs=argparse.REMAINDER)
     tr.set_defaults(fn=cmd_terrain)
 
-    for name in ("play", "export"):
-        s = sub.add_parser(name, help=f"{name} (not built yet)")
-        s.add_argument("rest", nargs=argparse.REMAINDER)
-        s.set_defaults(fn=cmd_not_yet)
+    pl = sub.add_parser("play", help="roll out a policy: mp4 video and/or MCAP for Foxglove")
+    pl.add_argument("--checkpoint", required=True, help="policy.npz")
+    pl.add_argument("--family", default="u_shaped")
+    pl.add_argument("--level", type=int, default=1, help="1-based level of the schedule")
+    pl.add_argument("--schedule", default="test", help="train | test | extended")
+    pl.add_argument("--robots", type=int, default=4)
+    pl.add_argument("--seconds", type=float, default=10.0, help="rollout length (s)")
+    pl.add_argument("--seed", type=int, default=0)
+    pl.add_argument("--episode-s", type=float, default=20.0, help="episode length (auto-reset)")
+    pl.add_argument("--resolution", type=float, default=0.025, help="terrain grid (m)")
+    pl.add_argument("--video", default=None, help="mp4 path (robot 0, tracking camera)")
+    pl.add_argument("--mcap", default=None, help="MCAP path (all robots)")
+    pl.add_argument("--width", type=int, default=640)
+    pl.add_argument("--height", type=int, default=480)
+    pl.add_argument("--fps", type=float, default=50.0, help="video fps (<= 50: subsampled)")
+    pl.set_defaults(fn=cmd_play)
+
+    ex = sub.add_parser("export", help="policy -> ONNX (normaliser + CNN + actor) + JSON sidecar")
+    ex.add_argument("--checkpoint", required=True, help="policy.npz")
+    ex.add_argument("--onnx", required=True, help="output .onnx (sidecar: <path>.json)")
+    ex.add_argument("--no-verify", dest="verify", action="store_false",
+                    help="skip the onnxruntime vs JAX check")
+    ex.set_defaults(fn=cmd_export)
     return p
 
 
