@@ -209,8 +209,13 @@ def _conv3x3(x: jax.Array, p: Params) -> jax.Array:
 
 
 def _maxpool2(x: jax.Array) -> jax.Array:
-    """[N, H, W, C] -> [N, H // 2, W // 2, C] (floor, like torch MaxPool2d(2))."""
-    return jax.lax.reduce_window(x, -jnp.inf, jax.lax.max, (1, 2, 2, 1), (1, 2, 2, 1), "VALID")
+    """[N, H, W, C] -> [N, H // 2, W // 2, C] (floor, like torch MaxPool2d(2)).
+
+    A reshape + max rather than reduce_window: its gradient avoids select_and_scatter, which
+    made the encoder's backward pass ~20 % slower on an H100."""
+    n, h, w, c = x.shape
+    h2, w2 = h // 2, w // 2
+    return x[:, : 2 * h2, : 2 * w2, :].reshape(n, h2, 2, w2, 2, c).max(axis=(2, 4))
 
 
 def _adaptive_avg_pool(x: jax.Array, out_hw: tuple[int, int]) -> jax.Array:

@@ -23,6 +23,20 @@ replicated; XLA (GSPMD) inserts the gradient averaging. One device works unchang
 
 ``run(config, env, run_dir=None, resume=False, on_chunk=None)`` is the host loop: progress,
 metrics (``metrics.jsonl``, TensorBoard under ``tb/``), checkpoints under ``checkpoints/``.
+
+Run directory ``<log_dir>/<experiment>__<seed>__<YYYYmmdd-HHMMSS>/``::
+
+    config.json                  the whole config (JSON of the dataclasses)
+    metrics.jsonl                one line per chunk: iteration, env_steps, wall_time, perf/*,
+                                 episode/*, loss/*, opt/*, value/*, every env metric
+    tb/                          TensorBoard scalars (x axis: env steps)
+    checkpoints/state_<it>.npz   full TrainState (the newest ``keep_checkpoints``)
+    policy.npz                   params + normaliser + network config + obs layout (eval/export)
+
+Bit-exact resume holds on the CPU. On a GPU, XLA's default kernels (cuDNN conv backward,
+atomic reductions) are not run-to-run deterministic, so a resumed run matches only up to float
+noise unless the process starts with ``XLA_FLAGS=--xla_gpu_deterministic_ops=true`` (seen on an
+H100: the resume test fails without it and passes with it).
 """
 
 from __future__ import annotations
