@@ -144,8 +144,15 @@ def cmd_play(args: argparse.Namespace) -> int:
         resolution=args.resolution,
     )
     try:
-        play.play(args.checkpoint, spec, video=args.video, mcap=args.mcap, width=args.width,
-                  height=args.height, fps=args.fps)
+        play.play(
+            args.checkpoint,
+            spec,
+            video=args.video,
+            mcap=args.mcap,
+            width=args.width,
+            height=args.height,
+            fps=args.fps,
+        )
     except play.RenderError as e:
         print(f"mjx-stairs play: error: {e}", file=sys.stderr)
         return 2
@@ -162,11 +169,14 @@ def cmd_export(args: argparse.Namespace) -> int:
         print(f"wrote {args.onnx} and {export.sidecar_path(args.onnx)}", flush=True)
         if args.verify:
             err = export.verify(policy, args.onnx)
-            print(f"onnxruntime vs JAX on 64 random observations: max |diff| = {err:.2e}",
-                  flush=True)
+            print(
+                f"onnxruntime vs JAX on 64 random observations: max |diff| = {err:.2e}", flush=True
+            )
             if err > 1e-5:
-                print("mjx-stairs export: error: the ONNX graph does not match the policy",
-                      file=sys.stderr)
+                print(
+                    "mjx-stairs export: error: the ONNX graph does not match the policy",
+                    file=sys.stderr,
+                )
                 return 1
     except export.ExportError as e:
         print(f"mjx-stairs export: error: {e}", file=sys.stderr)
@@ -182,7 +192,13 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("config", help="experiments/*.toml")
     t.add_argument("overrides", nargs="*", help="key.sub=value overrides")
     t.add_argument(
-        "--resume", action="store_true", help="continue the newest run of this experiment"
+        "--resume",
+        nargs="?",
+        const=True,
+        default=False,
+        metavar="STATE_FILE",
+        help="continue the newest run of this experiment, or from a checkpoint file (e.g. one "
+        "carried from another machine)",
     )
     t.add_argument("--run-dir", default=None, help="run directory (default: a new one)")
     t.set_defaults(fn=cmd_train)
@@ -276,8 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
     ex = sub.add_parser("export", help="policy -> ONNX (normaliser + CNN + actor) + JSON sidecar")
     ex.add_argument("--checkpoint", required=True, help="policy.npz")
     ex.add_argument("--onnx", required=True, help="output .onnx (sidecar: <path>.json)")
-    ex.add_argument("--no-verify", dest="verify", action="store_false",
-                    help="skip the onnxruntime vs JAX check")
+    ex.add_argument(
+        "--no-verify", dest="verify", action="store_false", help="skip the onnxruntime vs JAX check"
+    )
     ex.set_defaults(fn=cmd_export)
     return p
 
