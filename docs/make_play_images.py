@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
                              seconds=args.seconds, resolution=args.resolution)
         env = play.make_play_env(policy, spec)
         r = play.rollout(policy, spec, env)
-        print(play.summary(r, env))
+        print(play.summary(r))
 
         k = min(r.num_frames - 1, max(0, int(round(args.frame_s / r.dt)) - 1))
         (frame,) = play.render_frames(env.robot.mj_model, r.qpos[k:k + 1, 0], 640, 480,

@@ -190,7 +190,7 @@ def rollout(policy: Policy, spec: PlaySpec, env: envlib.StairEnv | None = None) 
     return Rollout(spec=spec, dt=float(env.dt), **rec)
 
 
-def summary(r: Rollout, env: envlib.StairEnv) -> str:
+def summary(r: Rollout) -> str:
     """A few lines about the rollout: per robot the distance to the goal at the end, episodes."""
     lines = [
         f"{r.spec.family} {r.spec.schedule} level {r.spec.level + 1}: {r.num_robots} robots, "
@@ -382,7 +382,7 @@ def play(
     t0 = time.time()
     r = rollout(policy, spec, env)
     out: dict[str, Any] = {"rollout": r, "env": env, "rollout_s": time.time() - t0}
-    print(summary(r, env), flush=True)
+    print(summary(r), flush=True)
     if mcap is not None:
         from mjx_stairs import mcap_log
 

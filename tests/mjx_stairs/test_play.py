@@ -108,6 +108,45 @@ def test_mcap_schemas_are_foxglove_types(played):
     assert summary.statistics.message_count == (1 + 8 * ROBOTS) * FRAMES + 2
 
 
+def _conform(msg, schema, where="") -> list[str]:
+    """Where `msg` breaks its JSON schema (types, known keys, array items, min/max items)."""
+    kind = schema.get("type")
+    types_ = {"object": dict, "array": list, "string": str, "boolean": bool,
+              "integer": int, "number": (int, float)}
+    if kind and (not isinstance(msg, types_[kind]) or (kind in ("integer", "number")
+                                                       and isinstance(msg, bool))):
+        return [f"{where}: {type(msg).__name__} is not {kind}"]
+    bad = []
+    if kind == "object":
+        props = schema.get("properties", {})
+        bad += [f"{where}.{k}: not in the schema" for k in msg if k not in props]
+        for k, v in msg.items():
+            if k in props:
+                bad += _conform(v, props[k], f"{where}.{k}")
+    elif kind == "array":
+        if not schema.get("minItems", 0) <= len(msg) <= schema.get("maxItems", len(msg)):
+            bad.append(f"{where}: {len(msg)} items")
+        for i, v in enumerate(msg[:50]):
+            bad += _conform(v, schema["items"], f"{where}[{i}]")
+    return bad
+
+
+def test_mcap_messages_fit_their_schemas(played):
+    import json
+
+    from mcap.reader import make_reader
+
+    seen = set()
+    with open(played.mcap, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.topic in seen:
+                continue
+            seen.add(channel.topic)
+            problems = _conform(json.loads(message.data), json.loads(schema.data))
+            assert not problems, (channel.topic, problems[:5])
+    assert len(seen) == 3 + 8 * ROBOTS  # /tf, /terrain, /robot_model, 8 per robot
+
+
 def test_mcap_poses_equal_the_rollout(played, log):
     r = played.rollout
     f32 = lambda v: np.asarray(v, np.float32)
