@@ -98,6 +98,8 @@ class EnvConfig:
     min_base_height: float = 0.12  # m above the terrain under the base; lower ends the episode
     terminate_on_trunk_contact: bool = True  # training only; off in evaluation
     spawn_height: float = 0.36  # base height above the spawn floor at reset (m)
+    spawn_margin: float = 0.15  # m taken off each side of a tile's spawn rectangle: a Go2 turned
+    # 45 deg reaches ~0.45 m from its centre, more than the terrain's 0.35 m wall clearance
     joint_noise_at_reset: float = 0.1  # rad, uniform +- around the nominal pose (0 in evaluation)
     success_distance: float = 0.5  # planar m
     success_speed: float = 0.3  # m/s
@@ -326,8 +328,10 @@ class StairEnv(Env):
         c = self.config
         ks = jax.random.split(rng, 10)
         sp = self._spawn[tile]
-        x = sp[0] + jax.random.uniform(ks[0], (), minval=-1.0, maxval=1.0) * sp[3]
-        y = sp[1] + jax.random.uniform(ks[1], (), minval=-1.0, maxval=1.0) * sp[4]
+        hx = jnp.maximum(sp[3] - c.spawn_margin, 0.0)
+        hy = jnp.maximum(sp[4] - c.spawn_margin, 0.0)
+        x = sp[0] + jax.random.uniform(ks[0], (), minval=-1.0, maxval=1.0) * hx
+        y = sp[1] + jax.random.uniform(ks[1], (), minval=-1.0, maxval=1.0) * hy
         yaw = sp[5] + jax.random.uniform(ks[2], (), minval=-1.0, maxval=1.0) * sp[6]
         joints = self._nominal + jax.random.uniform(
             ks[3], (12,), minval=-c.joint_noise_at_reset, maxval=c.joint_noise_at_reset
