@@ -287,6 +287,17 @@ def value(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
     return _mlp(params["critic"], encode(params, obs, layout))[..., 0]
 
 
+def actor_critic(
+    params: Params, obs: jax.Array, critic_obs: jax.Array, layout: ObsLayout
+) -> tuple[jax.Array, jax.Array]:
+    """(actor_mean(obs), value(critic_obs)) with ONE pass of the shared encoder over both
+    streams stacked on the batch axis: [N, D], [N, D] -> [N, A], [N]. The encoder's small
+    kernels are launch- and memory-bound, so one call on 2N maps costs less than two on N."""
+    n = obs.shape[0]
+    feats = encode(params, jnp.concatenate([obs, critic_obs], axis=0), layout)
+    return _mlp(params["actor"], feats[:n]), _mlp(params["critic"], feats[n:])[..., 0]
+
+
 def log_prob(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
     """Diagonal Gaussian log-density summed over the action axis: [..., A] -> [...]."""
     z = (action - mean) * jnp.exp(-log_std)

@@ -88,6 +88,18 @@ def critic_value(params, norm, critic_obs, net_cfg: NetworkConfig, layout: ObsLa
     return networks.value(params, norm_obs(norm, "privileged_state", critic_obs, net_cfg), layout)
 
 
+def policy_mean_and_value(
+    params, norm, obs, critic_obs, net_cfg: NetworkConfig, layout: ObsLayout
+) -> tuple[jax.Array, jax.Array]:
+    """policy_mean(obs) and critic_value(critic_obs) through one encoder pass: [N, D] x 2."""
+    return networks.actor_critic(
+        params,
+        norm_obs(norm, "state", obs, net_cfg),
+        norm_obs(norm, "privileged_state", critic_obs, net_cfg),
+        layout,
+    )
+
+
 # ----------------------------------------------------------------------------- GAE
 
 
@@ -144,10 +156,9 @@ def ppo_loss(
     layout: ObsLayout,
 ) -> tuple[jax.Array, dict[str, jax.Array]]:
     """Clipped surrogate + (clipped) value loss - entropy bonus on one minibatch [N, ...]."""
-    mean = policy_mean(params, norm, batch.obs, net_cfg, layout)
+    mean, value = policy_mean_and_value(params, norm, batch.obs, batch.critic_obs, net_cfg, layout)
     log_std = params["log_std"]
     log_prob = networks.log_prob(mean, log_std, batch.action)
-    value = critic_value(params, norm, batch.critic_obs, net_cfg, layout)
 
     adv = batch.advantage
     if cfg.normalize_advantages:

@@ -251,10 +251,9 @@ def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layou
     env_state, ep_return, ep_length = carry
     obs = env_state.obs["state"]
     critic_obs = env_state.obs["privileged_state"]
-    mean = ppo.policy_mean(params, norm, obs, net_cfg, layout)
+    mean, value = ppo.policy_mean_and_value(params, norm, obs, critic_obs, net_cfg, layout)
     action = networks.sample(key, mean, params["log_std"])
     log_prob = networks.log_prob(mean, params["log_std"], action)
-    value = ppo.critic_value(params, norm, critic_obs, net_cfg, layout)
 
     next_state = jax.vmap(env.step)(env_state, action)
     next_state = _constrain(next_state, mesh, 0)

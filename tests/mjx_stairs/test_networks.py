@@ -130,3 +130,26 @@ def test_cnn_mlp_gradient_matches_finite_differences():
         # every parameter group, the encoder included, receives gradient
         for name in ("encoder", "actor", "critic", "log_std"):
             assert float(sum(jnp.abs(x).sum() for x in jax.tree_util.tree_leaves(g[name]))) > 0
+
+
+def test_fused_actor_critic_equals_separate_passes():
+    layout = ObsLayout(49, (21, 21))
+    p = _init(jax.random.PRNGKey(3), NetworkConfig(), 49, (21, 21), 12)
+    k1, k2 = jax.random.split(jax.random.PRNGKey(4))
+    obs = jax.random.normal(k1, (7, 490))
+    critic_obs = jax.random.normal(k2, (7, 490))
+    mean, value = jax.jit(networks.actor_critic, static_argnums=3)(p, obs, critic_obs, layout)
+    np.testing.assert_allclose(mean, networks.actor_mean(p, obs, layout), atol=1e-5)
+    np.testing.assert_allclose(value, networks.value(p, critic_obs, layout), atol=1e-5)
+
+    def fused(p):
+        m, v = networks.actor_critic(p, obs, critic_obs, layout)
+        return jnp.sum(m**2) + jnp.sum(v)
+
+    def separate(p):
+        return jnp.sum(networks.actor_mean(p, obs, layout) ** 2) + jnp.sum(
+            networks.value(p, critic_obs, layout))
+
+    ga, gb = jax.grad(fused)(p), jax.grad(separate)(p)
+    for a, b in zip(jax.tree_util.tree_leaves(ga), jax.tree_util.tree_leaves(gb), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
