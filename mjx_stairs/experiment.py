@@ -8,14 +8,13 @@ finishes in minutes instead of the 4096-robot GPU run.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 
 import jax
 
-from mjx_stairs.config import ConfigError, apply_overrides, from_dict
+from mjx_stairs.config import ConfigError, apply_overrides, from_dict, read_toml
 from mjx_stairs.env import EnvConfig, StairEnv
 from mjx_stairs.networks import NetworkConfig
 from mjx_stairs.ppo import PPOConfig
@@ -66,12 +65,7 @@ def load(path: str | Path | None, overrides: Iterable[str] = (), cpu: bool | Non
     data: dict[str, Any] = {}
     if path is not None:
         path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: config file not found") from None
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigError(f"{path}: invalid TOML: {e}") from None
+        data = read_toml(path)
     cpu_table = data.pop("cpu", {})
     if cpu is None:
         cpu = jax.default_backend() == "cpu"

@@ -9,14 +9,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from mjx_stairs import evaluate
-from mjx_stairs.config import ConfigError
+from mjx_stairs.config import ConfigError, read_toml
 from mjx_stairs.train import load_policy
 
 PAPER_TABLE1 = {  # U-shaped model on each family, test levels 3 and 4 (%)
@@ -35,12 +34,7 @@ PAPER_TABLE2 = {  # each family's model on U-shaped stairs, levels 3 and 4 (%)
 def load_models(path: str | os.PathLike) -> dict[str, str]:
     """experiments/transfer_matrix.toml: a [models] table {family: policy path}."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: config file not found") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: invalid TOML: {e}") from None
+    data = read_toml(path)
     models = data.get("models")
     if not isinstance(models, dict) or not models:
         raise ConfigError(f'{path}: needs a [models] table of family = "policy.npz"')
@@ -98,22 +92,17 @@ def markdown(result: dict[str, Any]) -> str:
     """The success matrix and the transferability matrix as Markdown tables."""
     fams = list(result["models"])
     lv = ", ".join(f"L{v}" for v in result["levels"])
+
+    def table(values: dict[str, dict[str, float]]) -> list[str]:
+        rows = ["| model \\ stairs | " + " | ".join(fams) + " |", "|---|" + "---|" * len(fams)]
+        for s in fams:
+            rows.append(f"| {s} | " + " | ".join(f"{100 * values[s][d]:.1f}" for d in fams) + " |")
+        return rows
+
     lines = [f"Success (%), mean over test levels {lv}; rows: trained on, columns: tested on.", ""]
-    lines += ["| model \\ stairs | " + " | ".join(fams) + " |", "|---|" + "---|" * len(fams)]
-    for s in fams:
-        lines.append(
-            f"| {s} | "
-            + " | ".join(f"{100 * result['mean_success'][s][d]:.1f}" for d in fams)
-            + " |"
-        )
+    lines += table(result["mean_success"])
     lines += ["", "Transferability S_model(stairs) / S_stairs-model(stairs):", ""]
-    lines += ["| model \\ stairs | " + " | ".join(fams) + " |", "|---|" + "---|" * len(fams)]
-    for s in fams:
-        lines.append(
-            f"| {s} | "
-            + " | ".join(f"{100 * result['transferability'][s][d]:.1f}" for d in fams)
-            + " |"
-        )
+    lines += table(result["transferability"])
     return "\n".join(lines) + "\n"
 
 
