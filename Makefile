@@ -24,7 +24,7 @@ $(VENV)/.installed: pyproject.toml
 setup: $(SETUP)
 
 test: $(SETUP)
-	JAX_PLATFORMS=cpu $(PY) -m pytest tests -q
+	JAX_PLATFORMS=cpu $(PY) -m pytest tests
 
 lint: $(SETUP)
 	$(PY) -m ruff check mjx_stairs terrains tests
