@@ -13,7 +13,6 @@ the mcap reader.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -21,7 +20,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from mjx_stairs import play  # noqa: E402  (play sets MUJOCO_GL before mujoco is imported)
+from mjx_stairs import play  # noqa: E402
+from mjx_stairs.atomic import atomic_path  # noqa: E402  (play sets MUJOCO_GL before mujoco is imported)
 
 
 def fresh_policy(path: Path, seed: int = 0) -> None:
@@ -135,10 +135,9 @@ def plot_mcap(mcap_path: Path, out: Path, title: str) -> None:
 
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    fig.savefig(tmp)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp)
     plt.close(fig)
-    os.replace(tmp, out)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -179,9 +178,8 @@ def main(argv: list[str] | None = None) -> int:
         (frame,) = play.render_frames(env.robot.mj_model, r.qpos[k:k + 1, 0], 640, 480,
                                       goal=r.goal[k, 0])
         png = out / "play_frame.png"
-        tmp_png = png.with_name(f".{png.name}.tmp.png")
-        Image.fromarray(frame).save(tmp_png)
-        os.replace(tmp_png, png)
+        with atomic_path(png) as tmp_png:
+            Image.fromarray(frame).save(tmp_png)
         print(f"wrote {png} (robot 0 at t = {(k + 1) * r.dt:.2f} s, MUJOCO_GL={play.ensure_gl()})")
 
         mcap_path = Path(tmp) / "rollout.mcap"

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from mjx_stairs.checkpoint import CheckpointError
 from mjx_stairs.config import ConfigError
 
 
@@ -107,7 +108,7 @@ def cmd_critic_map(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     from mjx_stairs import bench, experiment
-    from mjx_stairs.evaluate import write_atomic
+    from mjx_stairs.atomic import write_text
 
     config, _ = experiment.load(args.config, args.overrides, cpu=False)
     out = bench.run_bench(
@@ -119,7 +120,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     )
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(args.out, json.dumps(out, indent=2))
+        write_text(args.out, json.dumps(out, indent=2))
         print(f"wrote {args.out}")
     return 0
 
@@ -304,14 +305,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     try:
         code = args.fn(args)
-    except (ConfigError, FileNotFoundError, ValueError) as e:
+    except (ConfigError, CheckpointError, FileNotFoundError, ValueError) as e:
         print(f"mjx-stairs {args.command}: error: {e}", file=sys.stderr)
         return 2
-    except Exception as e:  # checkpoint errors and the like: one line, no traceback
-        if type(e).__name__ in ("CheckpointError",):
-            print(f"mjx-stairs {args.command}: error: {e}", file=sys.stderr)
-            return 2
-        raise
     if args.command in ("train", "eval", "bench"):
         print(f"[mjx-stairs] {args.command} done in {time.time() - t0:.0f} s", flush=True)
     return code

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_stairs import atomic
 from mjx_stairs import env as envlib
 from mjx_stairs.config import from_dict
 from mjx_stairs.experiment import TerrainConfig, build_atlas
@@ -130,8 +131,8 @@ def evaluate(
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        write_atomic(out / "results.json", json.dumps(results, indent=2))
-        write_atomic(out / "results.md", markdown_table(results))
+        atomic.write_text(out / "results.json", json.dumps(results, indent=2))
+        atomic.write_text(out / "results.md", markdown_table(results))
     return results
 
 
@@ -149,17 +150,6 @@ def markdown_table(results: Sequence[dict[str, Any]]) -> str:
     n = results[0]["robots_per_level"] if results else 0
     rows.append(f"\nSuccess in % of {n} robots per cell, one episode each.")
     return "\n".join(rows) + "\n"
-
-
-def write_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write text to path through a temporary file and a rename."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 # ----------------------------------------------------------------------------- critic heat map
@@ -193,7 +183,7 @@ def critic_map(
     )
     env, _ = make_eval_env(policy, spec)
     tile = variant
-    ox, oy = env_origin(env, tile)
+    ox, oy = (float(v) for v in env.tile_origin[tile])
     xs = np.arange(ox + 0.2, ox + tile_size - 0.2 + 1e-9, spacing)
     ys = np.arange(oy + 0.2, oy + tile_size - 0.2 + 1e-9, spacing)
     gx, gy = np.meshgrid(xs, ys, indexing="xy")
@@ -240,11 +230,6 @@ def critic_map(
     }
 
 
-def env_origin(env: envlib.StairEnv, tile: int) -> tuple[float, float]:
-    """World xy of a tile's corner."""
-    return float(env.tile_origin[tile, 0]), float(env.tile_origin[tile, 1])
-
-
 def plot_critic_map(m: dict[str, np.ndarray], path: str | os.PathLike, title: str = "") -> None:
     """Heat map of the critic's value with the terrain's contours, goal and centre-line."""
     import matplotlib
@@ -273,10 +258,9 @@ def plot_critic_map(m: dict[str, np.ndarray], path: str | os.PathLike, title: st
     ax.legend(loc="upper right", fontsize=7)
     fig.colorbar(im, ax=ax, label="V")
     fig.tight_layout()
-    tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
-    fig.savefig(tmp)
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp)
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def plot_success(
@@ -304,7 +288,6 @@ def plot_success(
     ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
-    fig.savefig(tmp)
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp)
     plt.close(fig)
-    os.replace(tmp, path)

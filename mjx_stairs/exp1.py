@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from mjx_stairs import evaluate
+from mjx_stairs import atomic, evaluate
 from mjx_stairs.train import load_policy
 
 PAPER_U_SUCCESS = {3: 91.3, 4: 87.7}
@@ -52,8 +52,8 @@ def report(
         m, out / "fig4_critic_u.png", f"critic value, U-shaped test level {critic_level}"
     )
     summary = {"spec": dataclasses.asdict(spec), "results": results, "paper": PAPER_U_SUCCESS}
-    evaluate.write_atomic(out / "exp1.json", json.dumps(summary, indent=2))
-    evaluate.write_atomic(out / "exp1.md", markdown(results))
+    atomic.write_text(out / "exp1.json", json.dumps(summary, indent=2))
+    atomic.write_text(out / "exp1.md", markdown(results))
     print(markdown(results), flush=True)
     return summary
 

@@ -113,16 +113,14 @@ def publish(run_dir: str | Path, dest: str | Path, record: dict[str, Any], stop:
     """Copy a run's policy, metrics and config to `dest` and write run.json (hardware, wall
     time, env steps, steps/s). Each file is written through a temporary name and a rename."""
     import json
-    import os
     import platform
-    import shutil
+
+    from mjx_stairs import atomic
 
     run_dir, dest = Path(run_dir), Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     for name in ("policy.npz", "metrics.jsonl", "config.json"):
-        tmp = dest / f".{name}.tmp"
-        shutil.copyfile(run_dir / name, tmp)
-        os.replace(tmp, dest / name)
+        atomic.copy_file(run_dir / name, dest / name)
     rows = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
     rates = [r["perf/steps_per_s"] for r in rows[1:]] or [r["perf/steps_per_s"] for r in rows]
     facts = {
@@ -140,9 +138,7 @@ def publish(run_dir: str | Path, dest: str | Path, record: dict[str, Any], stop:
         "stop_reason": stop,
         "final": {k: record.get(k) for k in ("episode/return", "level", "at_top", "success")},
     }
-    tmp = dest / ".run.json.tmp"
-    tmp.write_text(json.dumps(facts, indent=2))
-    os.replace(tmp, dest / "run.json")
+    atomic.write_text(dest / "run.json", json.dumps(facts, indent=2))
 
 
 def _flatten(table: dict, prefix: str = ""):

@@ -28,9 +28,10 @@ from typing import Any
 import jax
 import numpy as np
 
+from mjx_stairs import atomic
 from mjx_stairs import normalizer as normlib
 from mjx_stairs import robot as rb
-from mjx_stairs.evaluate import env_config_of, write_atomic
+from mjx_stairs.evaluate import env_config_of
 from mjx_stairs.train import Policy, load_policy, policy_action
 
 OPSET = 17
@@ -294,18 +295,8 @@ def export_policy(policy: Policy, onnx_path: str | os.PathLike) -> dict[str, Any
     onnx_path = Path(onnx_path)
     data = build_onnx(policy).SerializeToString()
     side = sidecar(policy, data)
-    onnx_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = onnx_path.with_name(f".{onnx_path.name}.tmp{os.getpid()}")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, onnx_path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    write_atomic(sidecar_path(onnx_path), json.dumps(side, indent=2) + "\n")
+    atomic.write_bytes(onnx_path, data)
+    atomic.write_text(sidecar_path(onnx_path), json.dumps(side, indent=2) + "\n")
     return side
 
 

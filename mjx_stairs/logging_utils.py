@@ -8,6 +8,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from mjx_stairs import atomic
+
 RUN_TIME_FORMAT = "%Y%m%d-%H%M%S"
 
 
@@ -82,9 +84,7 @@ def truncate_jsonl(path: str | Path, max_iteration: int) -> None:
                 keep.append(line)
         except json.JSONDecodeError:
             continue
-    tmp = path.with_suffix(".jsonl.tmp")
-    tmp.write_text("".join(x + "\n" for x in keep), encoding="utf-8")
-    tmp.replace(path)
+    atomic.write_text(path, "".join(x + "\n" for x in keep))
 
 
 HEADLINE = ("episode/return", "episode/length", "level", "success")

@@ -41,6 +41,7 @@ import mujoco
 import numpy as np
 
 from mjx_stairs import robot as rb
+from mjx_stairs.atomic import atomic_path
 
 NS = 1_000_000_000
 
@@ -392,8 +393,6 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
     from mcap.writer import CompressionType, Writer
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     model = env.robot.mj_model
     ids = env.robot.ids
     data = mujoco.MjData(model)
@@ -404,121 +403,114 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
     action_scale = env.config.robot.action_scale
     path_stride = max(1, int(round(path_every_s / r.dt)))
     counts: dict[str, int] = {}
-    try:
-        with open(tmp, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(profile="", library="mjx_stairs")
-            schema_ids = {
-                name: w.register_schema(name, "jsonschema", json.dumps(s).encode())
-                for name, s in {**SCHEMAS, "mjx_stairs.Reward": _reward_schema(terms)}.items()
-            }
-            channels: dict[str, int] = {}
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start(profile="", library="mjx_stairs")
+        schema_ids = {
+            name: w.register_schema(name, "jsonschema", json.dumps(s).encode())
+            for name, s in {**SCHEMAS, "mjx_stairs.Reward": _reward_schema(terms)}.items()
+        }
+        channels: dict[str, int] = {}
 
-            def channel(topic: str, schema: str) -> None:
-                channels[topic] = w.register_channel(topic, "json", schema_ids[schema])
-                counts[topic] = 0
+        def channel(topic: str, schema: str) -> None:
+            channels[topic] = w.register_channel(topic, "json", schema_ids[schema])
+            counts[topic] = 0
 
-            seq = [0]
+        seq = [0]
 
-            def put(topic: str, t_ns: int, msg: dict[str, Any]) -> None:
-                w.add_message(channels[topic], log_time=t_ns, publish_time=t_ns,
-                              data=json.dumps(msg, separators=(",", ":")).encode(),
-                              sequence=seq[0])
-                seq[0] += 1
-                counts[topic] += 1
+        def put(topic: str, t_ns: int, msg: dict[str, Any]) -> None:
+            w.add_message(channels[topic], log_time=t_ns, publish_time=t_ns,
+                          data=json.dumps(msg, separators=(",", ":")).encode(),
+                          sequence=seq[0])
+            seq[0] += 1
+            counts[topic] += 1
 
-            channel("/tf", "foxglove.FrameTransforms")
-            channel("/terrain", "foxglove.SceneUpdate")
-            channel("/robot_model", "foxglove.SceneUpdate")
-            kinds = ["foxglove.PoseInFrame", "foxglove.PosesInFrame", "mjx_stairs.JointState",
-                     "mjx_stairs.FootContacts", "foxglove.Grid", "mjx_stairs.Reward",
-                     "mjx_stairs.Action", "mjx_stairs.Status"]
+        channel("/tf", "foxglove.FrameTransforms")
+        channel("/terrain", "foxglove.SceneUpdate")
+        channel("/robot_model", "foxglove.SceneUpdate")
+        kinds = ["foxglove.PoseInFrame", "foxglove.PosesInFrame", "mjx_stairs.JointState",
+                 "mjx_stairs.FootContacts", "foxglove.Grid", "mjx_stairs.Reward",
+                 "mjx_stairs.Action", "mjx_stairs.Status"]
+        for i in range(r.num_robots):
+            for topic, kind in zip(robot_topics(i), kinds, strict=True):
+                channel(topic, kind)
+
+        w.add_metadata("mjx_stairs", {
+            "family": r.spec.family, "schedule": r.spec.schedule,
+            "level": str(r.spec.level + 1), "robots": str(r.num_robots),
+            "seed": str(r.spec.seed), "dt_s": repr(r.dt), "frames": str(r.num_frames),
+            "reward_terms": ",".join(terms), "joint_names": ",".join(rb.JOINT_NAMES),
+            **(policy_meta or {}),
+        })
+
+        heights = np.asarray(model.hfield_data, np.float64).reshape(env.atlas_shape)
+        heights = env._h_lo + env._h_span * heights
+        put("/terrain", 0, {"deletions": [],
+                            "entities": [terrain_entity(heights, env.resolution)]})
+        put("/robot_model", 0, {"deletions": [], "entities": [
+            e for i in range(r.num_robots) for e in robot_entities(model, f"robot{i}")]})
+
+        paths: list[list[dict[str, Any]]] = [[] for _ in range(r.num_robots)]
+        for k in range(r.num_frames):
+            t_ns = int(round((k + 1) * r.dt * NS))
+            ts = stamp(t_ns)
+            transforms = []
             for i in range(r.num_robots):
-                for topic, kind in zip(robot_topics(i), kinds, strict=True):
-                    channel(topic, kind)
+                q = r.qpos[k, i]
+                pre = f"robot{i}"
+                yaw = _quat_yaw(q[3:7])
+                transforms.append({"timestamp": ts, "parent_frame_id": "world",
+                                   "child_frame_id": f"{pre}/base", "translation": _v3(q[:3]),
+                                   "rotation": _q(q[3:7])})
+                transforms.append({"timestamp": ts, "parent_frame_id": "world",
+                                   "child_frame_id": f"{pre}/heading",
+                                   "translation": _v3(q[:3]), "rotation": _q(_yaw_quat(yaw))})
+                for b, pos, quat in body_transforms(model, data, q):
+                    parent = model.body(model.body_parentid[b]).name
+                    transforms.append({"timestamp": ts,
+                                       "parent_frame_id": f"{pre}/{parent}",
+                                       "child_frame_id": f"{pre}/{model.body(b).name}",
+                                       "translation": _v3(pos), "rotation": _q(quat)})
+            put("/tf", t_ns, {"transforms": transforms})
 
-            w.add_metadata("mjx_stairs", {
-                "family": r.spec.family, "schedule": r.spec.schedule,
-                "level": str(r.spec.level + 1), "robots": str(r.num_robots),
-                "seed": str(r.spec.seed), "dt_s": repr(r.dt), "frames": str(r.num_frames),
-                "reward_terms": ",".join(terms), "joint_names": ",".join(rb.JOINT_NAMES),
-                **(policy_meta or {}),
-            })
-
-            heights = np.asarray(model.hfield_data, np.float64).reshape(env.atlas_shape)
-            heights = env._h_lo + env._h_span * heights
-            put("/terrain", 0, {"deletions": [],
-                                "entities": [terrain_entity(heights, env.resolution)]})
-            put("/robot_model", 0, {"deletions": [], "entities": [
-                e for i in range(r.num_robots) for e in robot_entities(model, f"robot{i}")]})
-
-            paths: list[list[dict[str, Any]]] = [[] for _ in range(r.num_robots)]
-            for k in range(r.num_frames):
-                t_ns = int(round((k + 1) * r.dt * NS))
-                ts = stamp(t_ns)
-                transforms = []
-                for i in range(r.num_robots):
-                    q = r.qpos[k, i]
-                    pre = f"robot{i}"
-                    yaw = _quat_yaw(q[3:7])
-                    transforms.append({"timestamp": ts, "parent_frame_id": "world",
-                                       "child_frame_id": f"{pre}/base", "translation": _v3(q[:3]),
-                                       "rotation": _q(q[3:7])})
-                    transforms.append({"timestamp": ts, "parent_frame_id": "world",
-                                       "child_frame_id": f"{pre}/heading",
-                                       "translation": _v3(q[:3]), "rotation": _q(_yaw_quat(yaw))})
-                    for b, pos, quat in body_transforms(model, data, q):
-                        parent = model.body(model.body_parentid[b]).name
-                        transforms.append({"timestamp": ts,
-                                           "parent_frame_id": f"{pre}/{parent}",
-                                           "child_frame_id": f"{pre}/{model.body(b).name}",
-                                           "translation": _v3(pos), "rotation": _q(quat)})
-                put("/tf", t_ns, {"transforms": transforms})
-
-                for i in range(r.num_robots):
-                    tp = robot_topics(i)
-                    q = r.qpos[k, i]
-                    goal = r.goal[k, i]
-                    put(tp[0], t_ns, {"timestamp": ts, "frame_id": "world",
-                                      "pose": _pose_msg(goal[:3], _yaw_quat(float(goal[3])))})
-                    if k == 0 or r.step[k, i] == 0:  # a new episode (0: fresh after a reset)
-                        paths[i] = []
-                    pose = _pose_msg(q[:3], q[3:7])
-                    if r.step[k, i] % path_stride == 0 or not paths[i]:
-                        paths[i].append(pose)
-                    shown = paths[i] if paths[i][-1] is pose else [*paths[i], pose]
-                    put(tp[1], t_ns, {"timestamp": ts, "frame_id": "world", "poses": shown})
-                    put(tp[2], t_ns, {
-                        "timestamp": ts, "name": list(rb.JOINT_NAMES),
-                        "position": [float(x) for x in q[ids.qpos_joints]],
-                        "velocity": [float(x) for x in r.qvel[k, i][ids.qvel_joints]],
-                        "effort": [float(x) for x in r.torque[k, i]],
-                    })
-                    put(tp[3], t_ns, {"timestamp": ts, **{
-                        leg: bool(c) for leg, c in zip(rb.LEGS, r.foot_contact[k, i],
-                                                       strict=True)}})
-                    put(tp[4], t_ns, height_grid(r.obs[k, i, n_vec:], t_ns, f"robot{i}/heading",
-                                                 hm.size, hm.spacing, -rb.NOMINAL_BASE_HEIGHT))
-                    put(tp[5], t_ns, {"timestamp": ts, "total": float(r.reward[k, i]),
-                                      **{t: float(r.terms[t][k, i]) for t in terms}})
-                    a = r.action[k, i]
-                    put(tp[6], t_ns, {"timestamp": ts, "action": [float(x) for x in a],
-                                      "q_target": [float(x) for x in
-                                                   nominal + action_scale * a]})
-                    put(tp[7], t_ns, {
-                        "timestamp": ts, "done": bool(r.done[k, i] > 0),
-                        "terminated": bool(r.terminated[k, i] > 0),
-                        "success": bool(r.success[k, i] > 0),
-                        "goal_distance": float(np.linalg.norm(goal[:2] - q[:2])),
-                        "episode_step": int(r.step[k, i]), "tile": int(r.tile[k, i]),
-                    })
-            w.finish()
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+            for i in range(r.num_robots):
+                tp = robot_topics(i)
+                q = r.qpos[k, i]
+                goal = r.goal[k, i]
+                put(tp[0], t_ns, {"timestamp": ts, "frame_id": "world",
+                                  "pose": _pose_msg(goal[:3], _yaw_quat(float(goal[3])))})
+                if k == 0 or r.step[k, i] == 0:  # a new episode (0: fresh after a reset)
+                    paths[i] = []
+                pose = _pose_msg(q[:3], q[3:7])
+                if r.step[k, i] % path_stride == 0 or not paths[i]:
+                    paths[i].append(pose)
+                shown = paths[i] if paths[i][-1] is pose else [*paths[i], pose]
+                put(tp[1], t_ns, {"timestamp": ts, "frame_id": "world", "poses": shown})
+                put(tp[2], t_ns, {
+                    "timestamp": ts, "name": list(rb.JOINT_NAMES),
+                    "position": [float(x) for x in q[ids.qpos_joints]],
+                    "velocity": [float(x) for x in r.qvel[k, i][ids.qvel_joints]],
+                    "effort": [float(x) for x in r.torque[k, i]],
+                })
+                put(tp[3], t_ns, {"timestamp": ts, **{
+                    leg: bool(c) for leg, c in zip(rb.LEGS, r.foot_contact[k, i],
+                                                   strict=True)}})
+                put(tp[4], t_ns, height_grid(r.obs[k, i, n_vec:], t_ns, f"robot{i}/heading",
+                                             hm.size, hm.spacing, -rb.NOMINAL_BASE_HEIGHT))
+                put(tp[5], t_ns, {"timestamp": ts, "total": float(r.reward[k, i]),
+                                  **{t: float(r.terms[t][k, i]) for t in terms}})
+                a = r.action[k, i]
+                put(tp[6], t_ns, {"timestamp": ts, "action": [float(x) for x in a],
+                                  "q_target": [float(x) for x in
+                                               nominal + action_scale * a]})
+                put(tp[7], t_ns, {
+                    "timestamp": ts, "done": bool(r.done[k, i] > 0),
+                    "terminated": bool(r.terminated[k, i] > 0),
+                    "success": bool(r.success[k, i] > 0),
+                    "goal_distance": float(np.linalg.norm(goal[:2] - q[:2])),
+                    "episode_step": int(r.step[k, i]), "tile": int(r.tile[k, i]),
+                })
+        w.finish()
     return counts
 
 

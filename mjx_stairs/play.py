@@ -39,6 +39,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mjx_stairs import env as envlib  # noqa: E402
+from mjx_stairs.atomic import atomic_path  # noqa: E402
 from mjx_stairs.evaluate import env_config_of  # noqa: E402
 from mjx_stairs.experiment import TerrainConfig, build_atlas  # noqa: E402
 from mjx_stairs.train import Policy, load_policy, policy_action  # noqa: E402
@@ -315,22 +316,15 @@ def write_video(frames: np.ndarray, path: str | os.PathLike, fps: float) -> None
         raise RenderError("writing a video needs imageio and imageio-ffmpeg "
                           "(pip install imageio imageio-ffmpeg)") from None
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix or '.mp4'}")
-    try:
-        with warnings.catch_warnings():
-            # ffmpeg runs as a subprocess (fork + exec at once): JAX's fork warning does not apply
-            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
-            with imageio.get_writer(
-                tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=7,
-                pixelformat="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
-            ) as w:
-                for f in frames:
-                    w.append_data(f)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(path, suffix=path.suffix or ".mp4") as tmp, warnings.catch_warnings():
+        # ffmpeg runs as a subprocess (fork + exec at once): JAX's fork warning does not apply
+        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
+        with imageio.get_writer(
+            tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=7,
+            pixelformat="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
+        ) as w:
+            for f in frames:
+                w.append_data(f)
 
 
 def render_video(

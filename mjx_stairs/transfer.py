@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_stairs import evaluate
+from mjx_stairs import atomic, evaluate
 from mjx_stairs.config import ConfigError, read_toml
 from mjx_stairs.train import load_policy
 
@@ -74,8 +74,8 @@ def matrix(
     if out_dir is not None:
         d = Path(out_dir)
         d.mkdir(parents=True, exist_ok=True)
-        evaluate.write_atomic(d / "transfer.json", json.dumps(out, indent=2))
-        evaluate.write_atomic(d / "transfer.md", markdown(out))
+        atomic.write_text(d / "transfer.json", json.dumps(out, indent=2))
+        atomic.write_text(d / "transfer.md", markdown(out))
     return out
 
 
