@@ -2,7 +2,8 @@
 # One experiment step on a lent GPU host (no package index there): install the wheelhouse that
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
-# Steps: bench-quick, bench, stage1, stage2, ablation, report. Each training step stops and
+# Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, stage1, stage2, ablation, stage2-pair (stage 2 and its
+# ablation side by side on one GPU, same wall budget each), report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -11,12 +12,14 @@
 set -uo pipefail
 T0=$(date +%s)
 DEADLINE=$1; shift
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-  --target /tmp/site .whl/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
+if [ -z "${SKIP_INSTALL:-}" ]; then  # SKIP_INSTALL=1: the packages are already importable
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+    --target /tmp/site .whl/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
+fi
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=egl
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"
 left() { echo $(( DEADLINE - ($(date +%s) - T0) )); }
-nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
 python3 -c "import jax, mujoco; print('jax', jax.__version__, jax.devices(), 'mujoco', mujoco.__version__)"
 
 train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz when carried
@@ -31,7 +34,8 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   local run; run=$(ls -td /tmp/runs/${name}__* | head -1)
   cp "$(ls "$run"/checkpoints/state_*.npz | tail -1)" "$OUT/$name/state.npz"
   if [ -f "$prev/metrics.jsonl" ]; then  # keep the whole curve across commands
-    cat "$prev/metrics.jsonl" "$OUT/$name/metrics.jsonl" > /tmp/m && mv /tmp/m "$OUT/$name/metrics.jsonl"
+    cat "$prev/metrics.jsonl" "$OUT/$name/metrics.jsonl" > "$OUT/$name/m.tmp" \
+      && mv "$OUT/$name/m.tmp" "$OUT/$name/metrics.jsonl"
   fi
   python3 - "$OUT/$name/metrics.jsonl" <<'PY'
 import json, sys
@@ -52,9 +56,24 @@ for step in "$@"; do
         --out "$OUT/bench.json" 2>&1 | grep -v warp ;;
     stage1) train stage1 experiments/stage1.toml ;;
     stage2) train stage2_u experiments/stage2_u.toml ;;
+    stage2-pair)  # two processes share the GPU: each gets under half of its memory
+      XLA_PYTHON_CLIENT_MEM_FRACTION=0.45 train stage2_u experiments/stage2_u.toml \
+        > >(sed 's/^/[stall] /') 2>&1 &
+      XLA_PYTHON_CLIENT_MEM_FRACTION=0.45 train stage2_u_no_stall \
+        experiments/stage2_u_no_stall.toml > >(sed 's/^/[no-stall] /') 2>&1 &
+      wait ;;
     ablation) train stage2_u_no_stall experiments/stage2_u_no_stall.toml ;;
-    report) python3 -m mjx_stairs exp1-report --stage2 experiments/results/stage2_u/policy.npz \
-        --ablation experiments/results/stage2_u_no_stall/policy.npz --out "$OUT/exp1" 2>&1 | grep -v warp ;;
+    bench4096) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
+        --out "$OUT/bench_4096.json" 2>&1 | grep -v warp ;;
+    report)  # the policies trained in this command when there are any, else the committed ones
+      p2=experiments/results/stage2_u/policy.npz; pa=experiments/results/stage2_u_no_stall/policy.npz
+      [ -f "$OUT/stage2_u/policy.npz" ] && p2=$OUT/stage2_u/policy.npz
+      [ -f "$OUT/stage2_u_no_stall/policy.npz" ] && pa=$OUT/stage2_u_no_stall/policy.npz
+      python3 -m mjx_stairs exp1-report --stage2 "$p2" --ablation "$pa" --out "$OUT/exp1" 2>&1 \
+        | grep -v warp ;;
+    pack)  # only 8 files come back from a device command: one tar per output folder
+      for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"; done
+      ls -la "$OUT" ;;
     *) echo "unknown step $step"; exit 2 ;;
   esac
   echo "== $step done at $(( $(date +%s) - T0 ))s"
