@@ -16,7 +16,7 @@ if [ -z "${SKIP_INSTALL:-}" ]; then  # SKIP_INSTALL=1: the packages are already 
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target /tmp/site .whl/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
 fi
-export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=egl
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"
 left() { echo $(( DEADLINE - ($(date +%s) - T0) )); }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
@@ -72,7 +72,7 @@ for step in "$@"; do
       python3 -m mjx_stairs exp1-report --stage2 "$p2" --ablation "$pa" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
     pack)  # only 8 files come back from a device command: one tar per output folder
-      for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"; done
+      shopt -s nullglob; for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"; done
       ls -la "$OUT" ;;
     *) echo "unknown step $step"; exit 2 ;;
   esac
