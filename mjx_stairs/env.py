@@ -81,6 +81,9 @@ class RandomizationConfig:
     push_velocity: float = 0.5  # m/s, uniform +- added to the base xy velocity
 
 
+GOAL_MODES = ("final", "waypoint")
+
+
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """The stair env."""
@@ -104,6 +107,15 @@ class EnvConfig:
     success_distance: float = 0.5  # planar m
     success_speed: float = 0.3  # m/s
     success_hold_s: float = 0.5  # s the success condition must hold
+    # What the goal observation points at. "final": the tile's goal (the paper's). "waypoint":
+    # a point `waypoint_lookahead_m` further along the stair's centre-line than the robot's own
+    # projection on it, with the centre-line's heading there; the final goal (and its yaw) once
+    # the goal is closer along the line than the lookahead. Ours, not the paper's: a building's
+    # stair centre-line is known from its map, and a goal behind the wall of a U-turn otherwise
+    # pulls a stage-1 policy straight into the wall. Rewards, success and the curriculum always
+    # use the final goal.
+    goal_mode: str = "final"
+    waypoint_lookahead_m: float = 1.0
 
 
 def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) -> EnvConfig:
@@ -180,6 +192,14 @@ class StairEnv(Env):
           atlas: a terrains.Atlas (heights, resolution, rows, cols, families and per-tile tables).
           config: env settings.
         """
+        if config.goal_mode not in GOAL_MODES:
+            raise ValueError(
+                f"env.goal_mode: unknown mode {config.goal_mode!r} (known: {list(GOAL_MODES)})"
+            )
+        if not config.waypoint_lookahead_m > 0:
+            raise ValueError(
+                f"env.waypoint_lookahead_m: must be > 0, got {config.waypoint_lookahead_m}"
+            )
         self.config = config
         self.atlas_shape = tuple(int(s) for s in atlas.heights.shape)
         self.resolution = float(atlas.resolution)
@@ -205,6 +225,7 @@ class StairEnv(Env):
         seg = np.linalg.norm(np.diff(line, axis=1), axis=-1)
         cumulative = np.concatenate([np.zeros_like(seg[:, :1]), np.cumsum(seg, axis=1)], axis=1)
         self._line = jnp.asarray(line)
+        self._line3 = jnp.asarray(atlas.centreline, jnp.float32)  # [n, K, 3] for waypoints
         self._line_cum = jnp.asarray(cumulative, jnp.float32)  # [n, K]
         self._line_len = jnp.asarray(cumulative[:, -1], jnp.float32)  # [n]
         self.tile_origin = np.asarray(atlas.origin, np.float32)  # [n, 2] host copy
@@ -445,7 +466,9 @@ class StairEnv(Env):
 
         # Terminations and truncation.
         base_clearance = pos[2] - self.terrain_height(pos[0], pos[1])
-        fell = (gravity_body[2] > -jnp.cos(c.max_tilt)) | (base_clearance < c.min_base_height)
+        tilted = gravity_body[2] > -jnp.cos(c.max_tilt)
+        too_low = base_clearance < c.min_base_height
+        fell = tilted | too_low
         outside = (
             (pos[0] < 0)
             | (pos[1] < 0)
@@ -504,6 +527,9 @@ class StairEnv(Env):
             truncated=truncated.astype(jnp.float32),
             nan_reset=(~finite).astype(jnp.float32),
             trunk_termination=(trunk_hit & ~fell).astype(jnp.float32),
+            tilt_termination=tilted.astype(jnp.float32),
+            low_termination=(too_low & ~tilted).astype(jnp.float32),
+            outside_termination=(outside & ~fell).astype(jnp.float32),
             level=level.astype(jnp.float32),
             at_top=(level == self.num_levels - 1).astype(jnp.float32),
             goal_distance=planar_goal_distance,
@@ -583,6 +609,23 @@ class StairEnv(Env):
             for g, rows in self._contact_rows.items()
         }
 
+    def goal_target(self, pos: jnp.ndarray, tile: jnp.ndarray) -> jnp.ndarray:
+        """The (x, y, z, yaw) the goal observation points at, per `config.goal_mode`."""
+        goal = self._goal[tile]
+        if self.config.goal_mode == "final":
+            return goal
+        line, cum, total = self._line3[tile], self._line_cum[tile], self._line_len[tile]
+        _, arc = rw.centreline_geometry(pos[:2], self._line[tile], cum)
+        s = arc + self.config.waypoint_lookahead_m
+        i = jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
+        seg = line[i + 1] - line[i]
+        seg_len = cum[i + 1] - cum[i]
+        t = jnp.clip((s - cum[i]) / jnp.maximum(seg_len, 1e-6), 0.0, 1.0)
+        point = line[i] + t * seg
+        yaw = jnp.arctan2(seg[1], seg[0])
+        waypoint = jnp.concatenate([point, yaw[None]])
+        return jnp.where(s >= total, goal, waypoint)
+
     def _observe(
         self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict, rng: jax.Array | None
     ) -> dict[str, jnp.ndarray]:
@@ -590,7 +633,7 @@ class StairEnv(Env):
         `rng` None both are clean."""
         pos, rot = qpos[:3], quat_to_mat(qpos[3:7])
         yaw = jnp.arctan2(rot[1, 0], rot[0, 0])
-        goal = self._goal[info["tile"]]
+        goal = self.goal_target(pos, info["tile"])
         parts = {
             "lin_vel": rot.T @ qvel[:3],
             "ang_vel": qvel[3:6],
@@ -627,6 +670,9 @@ class StairEnv(Env):
             "truncated",
             "nan_reset",
             "trunk_termination",
+            "tilt_termination",
+            "low_termination",
+            "outside_termination",
             "level",
             "at_top",
             "goal_distance",

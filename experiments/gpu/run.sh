@@ -2,7 +2,8 @@
 # One experiment step on a lent GPU host (no package index there): install the wheelhouse that
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
-# Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, stage1, stage2, ablation, stage2-pair (stage 2 and its
+# Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, stage1,
+# stage2, ablation, stage2-waypoint, stage2-pair (stage 2 and its
 # ablation side by side on one GPU, same wall budget each), report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
@@ -33,6 +34,7 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
     publish_dir="$OUT/$name" "$@" "${resume[@]}" 2>&1 | grep -v -e "warp" -e "^$"
   local run; run=$(ls -td /tmp/runs/${name}__* | head -1)
   cp "$(ls "$run"/checkpoints/state_*.npz | tail -1)" "$OUT/$name/state.npz"
+  mkdir -p /tmp/policies && cp "$OUT/$name/policy.npz" "/tmp/policies/$name.npz"  # for report
   if [ -f "$prev/metrics.jsonl" ]; then  # keep the whole curve across commands
     cat "$prev/metrics.jsonl" "$OUT/$name/metrics.jsonl" > "$OUT/$name/m.tmp" \
       && mv "$OUT/$name/m.tmp" "$OUT/$name/metrics.jsonl"
@@ -56,6 +58,7 @@ for step in "$@"; do
         --out "$OUT/bench.json" 2>&1 | grep -v warp ;;
     stage1) train stage1 experiments/stage1.toml ;;
     stage2) train stage2_u experiments/stage2_u.toml ;;
+    stage2-waypoint) train stage2_u_waypoint experiments/stage2_u_waypoint.toml ;;
     stage2-pair)  # two processes share the GPU: each gets under half of its memory
       XLA_PYTHON_CLIENT_MEM_FRACTION=0.45 train stage2_u experiments/stage2_u.toml \
         > >(sed 's/^/[stall] /') 2>&1 &
@@ -66,10 +69,13 @@ for step in "$@"; do
     bench4096) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
         --out "$OUT/bench_4096.json" 2>&1 | grep -v warp ;;
     report)  # the policies trained in this command when there are any, else the committed ones
-      p2=experiments/results/stage2_u/policy.npz; pa=experiments/results/stage2_u_no_stall/policy.npz
+      # (REPORT_STAGE2 / REPORT_ABLATION name others; an ablation file that is missing is left out)
+      p2=${REPORT_STAGE2:-experiments/results/stage2_u/policy.npz}
+      pa=${REPORT_ABLATION:-experiments/results/stage2_u_no_stall/policy.npz}
       [ -f "$OUT/stage2_u/policy.npz" ] && p2=$OUT/stage2_u/policy.npz
       [ -f "$OUT/stage2_u_no_stall/policy.npz" ] && pa=$OUT/stage2_u_no_stall/policy.npz
-      python3 -m mjx_stairs exp1-report --stage2 "$p2" --ablation "$pa" --out "$OUT/exp1" 2>&1 \
+      abl=(); [ -f "$pa" ] && abl=(--ablation "$pa")
+      python3 -m mjx_stairs exp1-report --stage2 "$p2" "${abl[@]}" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
     pack)  # only 8 files come back from a device command: one tar per output folder
       shopt -s nullglob; for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"; done
