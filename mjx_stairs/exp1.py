@@ -37,7 +37,10 @@ def report(
         policies["stage 2, no stall penalty"] = ablation
     results = {}
     for name, path in policies.items():
-        r = evaluate.success_by_level(load_policy(path), spec)
+        policy = load_policy(path)
+        if evaluate.env_config_of(policy).goal_mode == "waypoint":
+            name += ", waypoint goal"
+        r = evaluate.success_by_level(policy, spec)
         r["checkpoint"] = str(path)
         results[name] = r
     evaluate.plot_success(results, out / "fig2_u_success.png", paper=PAPER_U_SUCCESS)

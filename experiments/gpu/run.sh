@@ -3,7 +3,7 @@
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
 # Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, stage1,
-# stage2, ablation, stage2-waypoint, stage2-pair (stage 2 and its
+# stage2, ablation, stage2-final-goal, stage2-pair (stage 2 and its
 # ablation side by side on one GPU, same wall budget each), report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
@@ -58,7 +58,7 @@ for step in "$@"; do
         --out "$OUT/bench.json" 2>&1 | grep -v warp ;;
     stage1) train stage1 experiments/stage1.toml ;;
     stage2) train stage2_u experiments/stage2_u.toml ;;
-    stage2-waypoint) train stage2_u_waypoint experiments/stage2_u_waypoint.toml ;;
+    stage2-final-goal) train stage2_u_final_goal experiments/stage2_u_final_goal.toml ;;
     stage2-pair)  # two processes share the GPU: each gets under half of its memory
       XLA_PYTHON_CLIENT_MEM_FRACTION=0.45 train stage2_u experiments/stage2_u.toml \
         > >(sed 's/^/[stall] /') 2>&1 &

@@ -288,3 +288,67 @@ def test_packed_state_resumes_the_same_trajectory(env, fns):
         np.asarray(restored.pipeline_state.qpos), np.asarray(state.pipeline_state.qpos), atol=1e-4
     )
     np.testing.assert_allclose(np.asarray(restored.reward), np.asarray(state.reward), atol=1e-4)
+
+
+@pytest.fixture(scope="session")
+def u_atlas():
+    return terrains.build_atlas(
+        ["u_shaped"], "train", levels=[0], variants_per_family=2, resolution=0.05, tile_size=10.0
+    )
+
+
+def _point_at_arc(line, s):
+    """Numpy reference: the polyline point at arc length s and the heading of its segment."""
+    seg = np.diff(line, axis=0)
+    length = np.linalg.norm(seg[:, :2], axis=1)
+    keep = length > 1e-9
+    seg, length, start = seg[keep], length[keep], line[:-1][keep]
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    i = min(np.searchsorted(cum, s, side="right") - 1, len(length) - 1)
+    t = (s - cum[i]) / length[i]
+    return start[i] + t * seg[i], np.arctan2(seg[i, 1], seg[i, 0]), cum[-1]
+
+
+def test_waypoint_goal_follows_the_centreline_then_becomes_the_goal(u_atlas):
+    env = StairEnv(u_atlas, EnvConfig(goal_mode="waypoint", waypoint_lookahead_m=1.0))
+    final = StairEnv(u_atlas, EnvConfig())
+    target = jax.jit(env.goal_target)
+    for tile in range(2):  # left- and right-turning
+        line = np.asarray(u_atlas.centreline[tile], np.float64)
+        goal = np.asarray(u_atlas.goal[tile])
+        total = _point_at_arc(line, 0.0)[2]
+        for s in (0.0, 0.7, 2.5, total / 2, total - 1.5):
+            p, yaw, _ = _point_at_arc(line, s)
+            want, want_yaw, _ = _point_at_arc(line, s + 1.0)
+            got = np.asarray(target(jnp.asarray([p[0], p[1], p[2] + 0.3], jnp.float32), tile))
+            np.testing.assert_allclose(got[:3], want, atol=2e-3, err_msg=f"tile {tile} s {s}")
+            assert abs(np.angle(np.exp(1j * (got[3] - want_yaw)))) < 1e-3
+            # 1 m ahead along the line is 1 m or less away in a straight line (corners cut).
+            assert np.linalg.norm(got[:2] - p[:2]) <= 1.0 + 2e-3
+        # Closer than the lookahead along the line: the final goal itself, yaw included.
+        p, _, _ = _point_at_arc(line, total - 0.6)
+        got = np.asarray(target(jnp.asarray([p[0], p[1], p[2] + 0.3], jnp.float32), tile))
+        np.testing.assert_allclose(got, goal, atol=1e-5)
+        # The paper's mode always points at the goal.
+        np.testing.assert_allclose(np.asarray(final.goal_target(jnp.asarray(p, jnp.float32), tile)), goal)
+
+
+def test_waypoint_goal_is_what_the_policy_sees(u_atlas):
+    env = StairEnv(u_atlas, EnvConfig(goal_mode="waypoint"))
+    state = jax.jit(env.reset_at)(jax.random.PRNGKey(0), jnp.int32(0), jnp.int32(1))
+    qpos = state.pipeline_state.qpos
+    obs = np.asarray(env._observe(qpos, jnp.zeros(18), state.info, None)["privileged_state"])
+    wp = np.asarray(env.goal_target(qpos[:3], state.info["tile"]))
+    from mjx_stairs.env import quat_to_mat
+
+    rot = np.asarray(quat_to_mat(qpos[3:7]))
+    goal_obs = obs[45:49]
+    np.testing.assert_allclose(goal_obs[:3], rot.T @ (wp[:3] - np.asarray(qpos[:3])), atol=1e-5)
+    assert np.linalg.norm(goal_obs[:2]) < 1.2  # the waypoint, not the goal ~2 m across the wall
+
+
+def test_bad_goal_mode_is_a_one_line_error(u_atlas):
+    with pytest.raises(ValueError, match="env.goal_mode: unknown mode 'carrot'"):
+        StairEnv(u_atlas, EnvConfig(goal_mode="carrot"))
+    with pytest.raises(ValueError, match="env.waypoint_lookahead_m"):
+        StairEnv(u_atlas, EnvConfig(goal_mode="waypoint", waypoint_lookahead_m=0.0))
