@@ -53,6 +53,22 @@ def cmd_exp1_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_curves(args: argparse.Namespace) -> int:
+    from mjx_stairs import exp1
+
+    runs = {}
+    for item in args.run:
+        name, sep, path = item.partition("=")
+        runs[name if sep else Path(item).name] = path if sep else item
+    try:
+        exp1.plot_curves(runs, args.out)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"mjx-stairs curves: error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out}")
+    return 0
+
+
 def cmd_exp1(args: argparse.Namespace) -> int:
     from mjx_stairs import exp1
 
@@ -246,6 +262,13 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--resolution", type=float, default=0.025)
     x.add_argument("--out", required=True, help="output directory")
     x.set_defaults(fn=cmd_exp1_report)
+
+    cv = sub.add_parser("curves", help="training curves (success, level, return) of runs")
+    cv.add_argument(
+        "run", nargs="+", help="NAME=DIR or DIR: a published run directory or metrics.jsonl"
+    )
+    cv.add_argument("--out", required=True, help="PNG path")
+    cv.set_defaults(fn=cmd_curves)
 
     p1 = sub.add_parser("exp1", help="main job: stage 1, stage 2, ablation, EXP1 report")
     p1.add_argument("overrides", nargs="*", help="key.sub=value overrides for every stage")

@@ -81,6 +81,56 @@ def markdown(results: dict[str, dict[str, Any]]) -> str:
     return "\n".join(rows) + "\n"
 
 
+CURVE_KEYS = (
+    ("success", "success (share of ended episodes)"),
+    ("level", "mean curriculum level (0-based)"),
+    ("episode/return", "episode return"),
+)
+
+
+def read_metrics(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """The rows of a run's metrics.jsonl; a clear error for a missing or broken file."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "metrics.jsonl"
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: metrics file not found")
+    rows = []
+    for n, line in enumerate(p.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            raise ValueError(f"{p}:{n}: not a JSON line") from None
+    if not rows or "env_steps" not in rows[0]:
+        raise ValueError(f"{p}: no training rows (env_steps missing)")
+    return rows
+
+
+def plot_curves(runs: dict[str, str | os.PathLike], path: str | os.PathLike) -> None:
+    """Training curves against env steps: success, mean level and return, one line per run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = {name: read_metrics(p) for name, p in runs.items()}
+    fig, axes = plt.subplots(1, len(CURVE_KEYS), figsize=(5 * len(CURVE_KEYS), 3.6), dpi=100)
+    for ax, (key, label) in zip(axes, CURVE_KEYS, strict=True):
+        for name, rows in data.items():
+            xs = [r["env_steps"] / 1e6 for r in rows if key in r]
+            ax.plot(xs, [r[key] for r in rows if key in r], label=name, lw=1.2)
+        ax.set_xlabel("env steps (M)")
+        ax.set_title(label, fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
+
+
 STAGES = ("stage1", "stage2_u", "stage2_u_no_stall")
 
 

@@ -9,7 +9,7 @@
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
 # carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
-# stage-1 policy there first.
+# stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command.
 set -uo pipefail
 T0=$(date +%s)
 DEADLINE=$1; shift
@@ -31,7 +31,7 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   echo "== $name: budget ${budget}s ${resume[*]}"
   python3 -m mjx_stairs train "$toml" train.log_dir=/tmp/runs train.progress=false \
     train.console=false train.checkpoint_env=packed train.time_budget_s=$budget \
-    publish_dir="$OUT/$name" "$@" "${resume[@]}" 2>&1 | grep -v -e "warp" -e "^$"
+    publish_dir="$OUT/$name" ${TRAIN_ARGS:-} "$@" "${resume[@]}" 2>&1 | grep -v -e "warp" -e "^$"
   local run; run=$(ls -td /tmp/runs/${name}__* | head -1)
   cp "$(ls "$run"/checkpoints/state_*.npz | tail -1)" "$OUT/$name/state.npz"
   mkdir -p /tmp/policies && cp "$OUT/$name/policy.npz" "/tmp/policies/$name.npz"  # for report

@@ -330,7 +330,8 @@ def test_waypoint_goal_follows_the_centreline_then_becomes_the_goal(u_atlas):
         got = np.asarray(target(jnp.asarray([p[0], p[1], p[2] + 0.3], jnp.float32), tile))
         np.testing.assert_allclose(got, goal, atol=1e-5)
         # The paper's mode always points at the goal.
-        np.testing.assert_allclose(np.asarray(final.goal_target(jnp.asarray(p, jnp.float32), tile)), goal)
+        at_p = final.goal_target(jnp.asarray(p, jnp.float32), tile)
+        np.testing.assert_allclose(np.asarray(at_p), goal)
 
 
 def test_waypoint_goal_is_what_the_policy_sees(u_atlas):

@@ -117,3 +117,19 @@ def test_cli_errors_are_one_line(capsys, tmp_path):
     assert cli.main(["eval", "--checkpoint", str(tmp_path / "none.npz")]) == 2
     err = capsys.readouterr().err
     assert "none.npz" in err and len(err.strip().splitlines()) == 1
+
+
+def test_training_curves_from_published_runs(trained, tmp_path, capsys):
+    out = tmp_path / "curves.png"
+    assert cli.main(["curves", f"stage 1={trained / 'stage1'}", "--out", str(out)]) == 0
+    assert out.stat().st_size > 5000
+    rows = exp1.read_metrics(trained / "stage1")
+    assert [r["iteration"] for r in rows] == [1, 2]
+    broken = tmp_path / "broken.jsonl"
+    broken.write_text('{"env_steps": 1}\n{not json\n')
+    assert cli.main(["curves", str(broken), "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "broken.jsonl:2: not a JSON line" in err and len(err.strip().splitlines()) == 1
+    assert cli.main(["curves", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.png")]) == 2
+    assert "metrics file not found" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
