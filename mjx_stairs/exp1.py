@@ -134,6 +134,19 @@ def plot_curves(runs: dict[str, str | os.PathLike], path: str | os.PathLike) -> 
 STAGES = ("stage1", "stage2_u", "stage2_u_no_stall")
 
 
+def ablation_budget(stage2_run: str | os.PathLike) -> tuple[str, ...]:
+    """Overrides that give the ablation the budget stage 2 actually had: the iteration count of
+    its published run (a time-budgeted run stops before its config's total). None when stage 2
+    has no run record, or when its run stopped at its config's own total."""
+    p = Path(stage2_run)
+    if not p.is_file():
+        return ()
+    facts = json.loads(p.read_text())
+    if facts.get("stop_reason") == "total_iterations" or not facts.get("iterations"):
+        return ()
+    return (f"train.total_iterations={int(facts['iterations'])}",)
+
+
 def run_pipeline(
     force: bool = False, robots: int | None = None, overrides: tuple[str, ...] = ()
 ) -> None:
@@ -150,7 +163,10 @@ def run_pipeline(
     cpu = jax.default_backend() == "cpu"
     published = {}
     for name in STAGES:
-        config, _ = experiment.load(f"experiments/{name}.toml", overrides)
+        extra = ()
+        if name == "stage2_u_no_stall":
+            extra = ablation_budget(published["stage2_u"].parent / "run.json")
+        config, _ = experiment.load(f"experiments/{name}.toml", (*overrides, *extra))
         dest = Path(config.publish_dir)
         published[name] = dest / "policy.npz"
         if published[name].exists() and not force:

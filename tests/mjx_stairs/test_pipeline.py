@@ -133,3 +133,14 @@ def test_training_curves_from_published_runs(trained, tmp_path, capsys):
     assert cli.main(["curves", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.png")]) == 2
     assert "metrics file not found" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_ablation_gets_the_budget_stage2_had(tmp_path):
+    run = tmp_path / "run.json"
+    assert exp1.ablation_budget(run) == ()  # stage 2 not published: the config's own budget
+    run.write_text(json.dumps({"iterations": 290, "stop_reason": "time_budget"}))
+    assert exp1.ablation_budget(run) == ("train.total_iterations=290",)
+    run.write_text(json.dumps({"iterations": 1500, "stop_reason": "total_iterations"}))
+    assert exp1.ablation_budget(run) == ()
+    published = "experiments/results/stage2_u/run.json"  # the committed GPU run
+    assert exp1.ablation_budget(published) == ("train.total_iterations=290",)
