@@ -204,6 +204,14 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
     entries, i = [], 0
     for nm, n, unit, desc in OBS_VECTOR:
         group = NOISE_GROUP.get(nm)
+        if nm == "goal" and cfg.goal_mode == "waypoint":
+            desc = (
+                f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
+                "further along the stair centre-line than the base's projection on it, with the "
+                "centre-line's heading there as its yaw, and the final goal (position and yaw) "
+                f"once that is nearer than {cfg.waypoint_lookahead_m:g} m along the line "
+                "(mjx_stairs.env.StairEnv.goal_target)"
+            )
         entries.append({"name": nm, "start": i, "stop": i + n, "unit": unit,
                         "description": desc,
                         "training_noise": getattr(noise, group) if group else 0.0})

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import types
 
@@ -204,3 +205,14 @@ def test_cli_export_bad_checkpoint(tmp_path, capsys, damage):
     assert len(err) == 1 and err[0].startswith("mjx-stairs export: error:")
     assert ("not found" if damage == "missing" else "corrupt") in err[0]
     assert not (tmp_path / "p.onnx").exists()
+
+
+def test_sidecar_says_what_the_goal_input_is(policy, exported):
+    _, side = exported
+    (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
+    assert "waypoint" not in goal["description"]  # the default, final-goal policy
+    meta = copy.deepcopy(policy.metadata)
+    meta["config"]["env"].update(goal_mode="waypoint", waypoint_lookahead_m=1.5)
+    side = export.sidecar(policy._replace(metadata=meta))
+    (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
+    assert "waypoint" in goal["description"] and "1.5 m" in goal["description"]
