@@ -66,7 +66,7 @@ def test_ppo_learns_the_toy_task(learner, seed):
     assert returns[-1] > 5 * RANDOM_POLICY_RETURN
     assert time.time() - t0 < 60.0
     assert float(metrics["success"]) > 0.3
-    assert 1e-5 <= float(metrics["opt/lr"]) <= 1e-2
+    assert 1e-5 * (1 - 1e-6) <= float(metrics["opt/lr"]) <= 1e-2  # floor 1e-5 in float32
 
 
 def test_layout_from_env():
