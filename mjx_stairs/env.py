@@ -221,11 +221,11 @@ class StairEnv(Env):
         # Per-tile tables.
         self._spawn = jnp.asarray(atlas.spawn, jnp.float32)  # [n, 7]
         self._goal = jnp.asarray(atlas.goal, jnp.float32)  # [n, 4]
-        line = np.asarray(atlas.centreline, np.float32)[..., :2]  # [n, K, 2]
-        seg = np.linalg.norm(np.diff(line, axis=1), axis=-1)
+        line3 = np.asarray(atlas.centreline, np.float32)  # [n, K, 3]
+        seg = np.linalg.norm(np.diff(line3[..., :2], axis=1), axis=-1)
         cumulative = np.concatenate([np.zeros_like(seg[:, :1]), np.cumsum(seg, axis=1)], axis=1)
-        self._line = jnp.asarray(line)
-        self._line3 = jnp.asarray(atlas.centreline, jnp.float32)  # [n, K, 3] for waypoints
+        self._line3 = jnp.asarray(line3)  # waypoints take their z from it
+        self._line = self._line3[..., :2]
         self._line_cum = jnp.asarray(cumulative, jnp.float32)  # [n, K]
         self._line_len = jnp.asarray(cumulative[:, -1], jnp.float32)  # [n]
         self.tile_origin = np.asarray(atlas.origin, np.float32)  # [n, 2] host copy
@@ -491,7 +491,7 @@ class StairEnv(Env):
             success=success,
         )
         k_noise, k_reset, info["rng"] = jax.random.split(info["rng"], 3)
-        final_obs = self._observe(qpos, qvel, info, k_noise)
+        final_obs = self._observe(qpos, qvel, info, k_noise, arc=arc)
 
         # Curriculum, then auto-reset of the robots whose episode ended.
         level = info["level"]
@@ -609,13 +609,17 @@ class StairEnv(Env):
             for g, rows in self._contact_rows.items()
         }
 
-    def goal_target(self, pos: jnp.ndarray, tile: jnp.ndarray) -> jnp.ndarray:
-        """The (x, y, z, yaw) the goal observation points at, per `config.goal_mode`."""
+    def goal_target(
+        self, pos: jnp.ndarray, tile: jnp.ndarray, arc: jnp.ndarray | None = None
+    ) -> jnp.ndarray:
+        """The (x, y, z, yaw) the goal observation points at, per `config.goal_mode`. `arc`: the
+        arc length of pos's projection on the tile's centre-line, when the caller has it."""
         goal = self._goal[tile]
         if self.config.goal_mode == "final":
             return goal
         line, cum, total = self._line3[tile], self._line_cum[tile], self._line_len[tile]
-        _, arc = rw.centreline_geometry(pos[:2], self._line[tile], cum)
+        if arc is None:
+            _, arc = rw.centreline_geometry(pos[:2], self._line[tile], cum)
         s = arc + self.config.waypoint_lookahead_m
         i = jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
         seg = line[i + 1] - line[i]
@@ -627,13 +631,18 @@ class StairEnv(Env):
         return jnp.where(s >= total, goal, waypoint)
 
     def _observe(
-        self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict, rng: jax.Array | None
+        self,
+        qpos: jnp.ndarray,
+        qvel: jnp.ndarray,
+        info: dict,
+        rng: jax.Array | None,
+        arc: jnp.ndarray | None = None,
     ) -> dict[str, jnp.ndarray]:
         """Actor (noisy) and critic (clean) observations [49 + 441] from qpos/qvel alone; with
-        `rng` None both are clean."""
+        `rng` None both are clean. `arc` (optional): see `goal_target`."""
         pos, rot = qpos[:3], quat_to_mat(qpos[3:7])
         yaw = jnp.arctan2(rot[1, 0], rot[0, 0])
-        goal = self.goal_target(pos, info["tile"])
+        goal = self.goal_target(pos, info["tile"], arc)
         parts = {
             "lin_vel": rot.T @ qvel[:3],
             "ang_vel": qvel[3:6],

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from mjx_stairs import atomic, evaluate
+from mjx_stairs import atomic, evaluate, logging_utils
 from mjx_stairs.train import load_policy
 
 PAPER_U_SUCCESS = {3: 91.3, 4: 87.7}
@@ -89,20 +89,9 @@ CURVE_KEYS = (
 
 
 def read_metrics(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """The rows of a run's metrics.jsonl; a clear error for a missing or broken file."""
+    """The rows of a run's metrics (a run or published directory, or its metrics.jsonl)."""
     p = Path(path)
-    if p.is_dir():
-        p = p / "metrics.jsonl"
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: metrics file not found")
-    rows = []
-    for n, line in enumerate(p.read_text().splitlines(), 1):
-        if not line.strip():
-            continue
-        try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError:
-            raise ValueError(f"{p}:{n}: not a JSON line") from None
+    rows = logging_utils.read_jsonl(p / "metrics.jsonl" if p.is_dir() else p)
     if not rows or "env_steps" not in rows[0]:
         raise ValueError(f"{p}: no training rows (env_steps missing)")
     return rows

@@ -72,6 +72,22 @@ class MetricsLogger:
             self._tb.close()
 
 
+def read_jsonl(path: str | Path) -> list[dict[str, Any]]:
+    """The records of a JSON-lines file; a clear error naming a missing file or a broken line."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: metrics file not found")
+    rows = []
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            raise ValueError(f"{path}:{n}: not a JSON line") from None
+    return rows
+
+
 def truncate_jsonl(path: str | Path, max_iteration: int) -> None:
     """Drop lines logged after ``max_iteration`` (used on resume from an older checkpoint)."""
     path = Path(path)

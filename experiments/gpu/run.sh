@@ -68,12 +68,13 @@ for step in "$@"; do
     ablation) train stage2_u_no_stall experiments/stage2_u_no_stall.toml ;;
     bench4096) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
         --out "$OUT/bench_4096.json" 2>&1 | grep -v warp ;;
-    report)  # the policies trained in this command when there are any, else the committed ones
-      # (REPORT_STAGE2 / REPORT_ABLATION name others; an ablation file that is missing is left out)
-      p2=${REPORT_STAGE2:-experiments/results/stage2_u/policy.npz}
-      pa=${REPORT_ABLATION:-experiments/results/stage2_u_no_stall/policy.npz}
-      [ -f "$OUT/stage2_u/policy.npz" ] && p2=$OUT/stage2_u/policy.npz
-      [ -f "$OUT/stage2_u_no_stall/policy.npz" ] && pa=$OUT/stage2_u_no_stall/policy.npz
+    report)  # the policies trained in this command (train copies them to /tmp/policies), else
+      # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
+      # left out
+      p2=experiments/results/stage2_u/policy.npz; pa=experiments/results/stage2_u_no_stall/policy.npz
+      [ -f /tmp/policies/stage2_u.npz ] && p2=/tmp/policies/stage2_u.npz
+      [ -f /tmp/policies/stage2_u_no_stall.npz ] && pa=/tmp/policies/stage2_u_no_stall.npz
+      p2=${REPORT_STAGE2:-$p2}; pa=${REPORT_ABLATION:-$pa}
       abl=(); [ -f "$pa" ] && abl=(--ablation "$pa")
       python3 -m mjx_stairs exp1-report --stage2 "$p2" "${abl[@]}" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
