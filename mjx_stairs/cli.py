@@ -100,6 +100,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         episode_length_s=args.episode_s,
         seed=args.seed,
         resolution=args.resolution,
+        env_overrides=tuple(args.env),
     )
     evaluate.evaluate(args.checkpoint, args.family, spec, args.out)
     return 0
@@ -225,6 +226,14 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--schedule", default="test", help="train | test | extended")
     e.add_argument("--episode-s", type=float, default=20.0, help="evaluation episode length (s)")
     e.add_argument("--resolution", type=float, default=0.025)
+    e.add_argument(
+        "--env",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override the policy's env config, keys under [env], e.g. "
+        "robot.shin_collision=true (evaluate in other physics than trained with)",
+    )
     e.add_argument("--out", default=None, help="directory for results.json and results.md")
     e.set_defaults(fn=cmd_eval)
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from mjx_stairs import atomic
 from mjx_stairs import env as envlib
-from mjx_stairs.config import from_dict
+from mjx_stairs.config import apply_overrides, from_dict, to_dict
 from mjx_stairs.experiment import TerrainConfig, build_atlas
 from mjx_stairs.robot import NOMINAL_BASE_HEIGHT
 from mjx_stairs.train import Policy, load_policy, policy_action, policy_value
@@ -39,12 +39,19 @@ class EvalSpec:
     seed: int = 0
     resolution: float = 0.025
     tile_size: float = 10.0
+    # "key=value" overrides of the policy's env config, keys relative to [env], e.g.
+    # "robot.shin_collision=true": evaluate a policy trained with cheaper physics settings in the
+    # reference physics
+    env_overrides: tuple[str, ...] = ()
 
 
-def env_config_of(policy: Policy) -> envlib.EnvConfig:
-    """The EnvConfig the policy was trained with (robot, PD, obs layout), from its metadata."""
+def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> envlib.EnvConfig:
+    """The EnvConfig the policy was trained with (robot, PD, obs layout), from its metadata,
+    with ``overrides`` ("robot.ls_iterations=5", ...) applied."""
     cfg = policy.metadata.get("config", {}).get("env")
-    return envlib.EnvConfig() if cfg is None else from_dict(envlib.EnvConfig, cfg)
+    if cfg is None:
+        cfg = to_dict(envlib.EnvConfig())
+    return from_dict(envlib.EnvConfig, apply_overrides(cfg, overrides), prefix="env")
 
 
 def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[envlib.StairEnv, Any]:
@@ -62,7 +69,7 @@ def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[envlib.StairEnv, Any]
             tile_size=spec.tile_size,
         )
     )
-    cfg = envlib.evaluation_config(env_config_of(policy), spec.episode_length_s)
+    cfg = envlib.evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
     return envlib.StairEnv(atlas, cfg), levels
 
 
@@ -109,6 +116,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
         "seed": spec.seed,
         "wall_s": wall,
         "device": jax.devices()[0].device_kind,
+        **({"env_overrides": list(spec.env_overrides)} if spec.env_overrides else {}),
     }
 
 
@@ -146,6 +154,8 @@ def markdown_table(results: Sequence[dict[str, Any]]) -> str:
         by = dict(zip(r["levels"], r["success"], strict=True))
         cells = [f"{100 * by[lv]:.1f}" if lv in by else "" for lv in levels]
         name = Path(r.get("checkpoint", "")).parent.name or r.get("checkpoint", "")
+        if r.get("env_overrides"):
+            name += " (" + ", ".join(r["env_overrides"]) + ")"
         rows.append(f"| {name} | {r['family']} | " + " | ".join(cells) + " |")
     n = results[0]["robots_per_level"] if results else 0
     rows.append(f"\nSuccess in % of {n} robots per cell, one episode each.")

@@ -2,8 +2,9 @@
 # One experiment step on a lent GPU host (no package index there): install the wheelhouse that
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
-# Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, stage1,
-# stage2, ablation, stage2-final-goal, stage2-pair (stage 2 and its
+# Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, encoder,
+# levers, bench4096-row, bench4096-fast, stage1,
+# stage2, ablation, stage2-fast, stage2-final-goal, stage2-pair (stage 2 and its
 # ablation side by side on one GPU, same wall budget each), report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
@@ -66,8 +67,33 @@ for step in "$@"; do
         experiments/stage2_u_no_stall.toml > >(sed 's/^/[no-stall] /') 2>&1 &
       wait ;;
     ablation) train stage2_u_no_stall experiments/stage2_u_no_stall.toml ;;
+    stage2-fast)  # issue 7's fidelity check: stage 2 with the faster settings (row encoder, no
+      # shin spheres, 3 line-search steps), then evaluated in the reference physics it was not
+      # trained in (shins on, 5 line-search steps), 1000 robots per level
+      train stage2_u_fast experiments/stage2_u.toml train.experiment=stage2_u_fast \
+        network.conv_impl=row env.robot.shin_collision=false env.robot.ls_iterations=3
+      python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_fast.npz --robots 1000 \
+        --env robot.shin_collision=true robot.ls_iterations=5 \
+        --out "$OUT/stage2_u_fast/eval_reference_physics" 2>&1 | grep -v warp ;;
     bench4096) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
         --out "$OUT/bench_4096.json" 2>&1 | grep -v warp ;;
+    # issue 7's levers, all into $OUT/bench/ (one tar after pack): the encoder alone (xla vs row
+    # convolutions), physics-only (a) for each physics setting, and (a)+(b)+(c) with the row
+    # encoder, with and without the faster physics settings
+    encoder) mkdir -p "$OUT/bench"; python3 experiments/gpu/encoder_bench.py --batch 49152 \
+        --out "$OUT/bench/encoder.json" 2>&1 | grep -v warp ;;
+    levers) mkdir -p "$OUT/bench"
+      for v in "noshin:env.robot.shin_collision=false" "ls3:env.robot.ls_iterations=3"; do
+        python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
+          --parts physics --repeats 3 ${v#*:} --out "$OUT/bench/a_${v%%:*}.json" 2>&1 | grep -v warp
+      done ;;
+    bench4096-row) mkdir -p "$OUT/bench"; python3 -m mjx_stairs bench --config \
+        experiments/stage2_u.toml --robots 4096 network.conv_impl=row \
+        --out "$OUT/bench/abc_row.json" 2>&1 | grep -v warp ;;
+    bench4096-fast) mkdir -p "$OUT/bench"; python3 -m mjx_stairs bench --config \
+        experiments/stage2_u.toml --robots 4096 network.conv_impl=row \
+        env.robot.shin_collision=false env.robot.ls_iterations=3 \
+        --out "$OUT/bench/abc_fast.json" 2>&1 | grep -v warp ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out

@@ -66,6 +66,19 @@ def test_eval_and_exp1_report(trained, tmp_path):
     assert set(summary["results"]) == {"stage 2 (stall penalty)"}
 
 
+def test_eval_env_overrides_change_the_physics_not_the_policy(trained):
+    policy = load_policy(trained / "stage1" / "policy.npz")
+    trained_cfg = evaluate.env_config_of(policy)
+    ref = evaluate.env_config_of(policy, ["robot.shin_collision=false", "robot.ls_iterations=3"])
+    assert trained_cfg.robot.shin_collision and trained_cfg.robot.ls_iterations == 5
+    assert not ref.robot.shin_collision and ref.robot.ls_iterations == 3
+    assert ref.robot.kp == trained_cfg.robot.kp and ref.goal_mode == trained_cfg.goal_mode
+    with pytest.raises(Exception, match=r"unknown config key 'env\.robot\.shins'"):
+        evaluate.env_config_of(policy, ["robot.shins=false"])
+    with pytest.raises(Exception, match="not of the form"):
+        evaluate.env_config_of(policy, ["robot.shin_collision"])
+
+
 def test_critic_map_covers_the_tile_and_blanks_walls(trained):
     m = evaluate.critic_map(
         load_policy(trained / "stage1" / "policy.npz"), "u_shaped", 2, spacing=0.25, resolution=0.05
