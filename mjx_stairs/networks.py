@@ -28,12 +28,14 @@ stream with the same encoder weights, and both losses train it.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 Params = dict[str, Any]
 
@@ -68,6 +70,11 @@ class NetworkConfig:
     )
     obs_clip: float = field(
         default=10.0, metadata={"help": "clip normalised observations to +-obs_clip (0 = off)"}
+    )
+    conv_impl: str = field(
+        default="xla",
+        metadata={"help": "'xla' (lax.conv) or 'row' (row-Toeplitz matmul: same function, "
+                  "faster on GPUs for these tiny maps)"},
     )
 
 
@@ -154,6 +161,7 @@ def init_params(
     Orthogonal init (rsl_rl / CleanRL style): gain sqrt(2) for hidden layers and convs (as
     [9 C_in, C_out] matrices), 0.01 for the actor output, 1 for the critic output; zero biases.
     """
+    _conv_fn(cfg.conv_impl)
     map_shape = tuple(map_shape)
     relu_gain = math.sqrt(2.0)
     specs: list[tuple[int, int, float]] = []
@@ -208,6 +216,55 @@ def _conv3x3(x: jax.Array, p: Params) -> jax.Array:
     return y + p["b"]
 
 
+@functools.lru_cache(maxsize=None)
+def _width_shifts(w: int) -> np.ndarray:
+    """Constant 0/1 tensor S [3 (kx), w (input col), w (output col)]: S[kx, i, o] = 1 where
+    i = o + kx - 1 lies inside the row (columns outside are SAME padding's zeros)."""
+    s = np.zeros((3, w, w), np.float32)
+    for kx in range(3):
+        o = np.arange(w)
+        i = o + kx - 1
+        ok = (i >= 0) & (i < w)
+        s[kx, i[ok], o[ok]] = 1.0
+    s.setflags(write=False)
+    return s
+
+
+def _row_toeplitz(k: jax.Array, w: int) -> jax.Array:
+    """Kernel [3, 3, Cin, Cout] -> T [3 * w * Cin, w * Cout], rows ordered (ky, col, cin),
+    columns (col, cout): one matmul of the 3 stacked neighbouring rows with T is the conv.
+    HIGHEST precision so a TF32 default cannot round the weights: S only selects them."""
+    c_in, c_out = k.shape[2], k.shape[3]
+    t = jnp.einsum("xio,yxcd->yicod", _width_shifts(w), k,
+                   precision=jax.lax.Precision.HIGHEST)
+    return t.reshape(3 * w * c_in, w * c_out)
+
+
+def _conv3x3_row(x: jax.Array, p: Params) -> jax.Array:
+    """``_conv3x3`` as one batched matmul (row-Toeplitz): [N, H, W, Cin] -> [N, H, W, Cout].
+
+    Rows h-1, h, h+1 (zero rows past the edges) are concatenated into [N, H, 3 W Cin] and
+    multiplied by ``_row_toeplitz``, which holds the width shifts and their zero padding. For
+    these tiny maps a dense matmul beats cuDNN's launch- and layout-bound small convs."""
+    n, h, w, c_in = x.shape
+    c_out = p["w"].shape[-1]
+    xp = jnp.pad(x.reshape(n, h, w * c_in), ((0, 0), (1, 1), (0, 0)))
+    rows = jnp.concatenate([xp[:, :h], xp[:, 1 : h + 1], xp[:, 2:]], axis=-1)
+    y = rows @ _row_toeplitz(p["w"], w)
+    return y.reshape(n, h, w, c_out) + p["b"]
+
+
+CONV_IMPLS = {"xla": _conv3x3, "row": _conv3x3_row}
+
+
+def _conv_fn(conv_impl: str):
+    try:
+        return CONV_IMPLS[conv_impl]
+    except (KeyError, TypeError):
+        raise ValueError(f"network.conv_impl: unknown conv_impl {conv_impl!r} (expected one of "
+                         f"{', '.join(repr(k) for k in CONV_IMPLS)})") from None
+
+
 def _maxpool2(x: jax.Array) -> jax.Array:
     """[N, H, W, C] -> [N, H // 2, W // 2, C] (floor, like torch MaxPool2d(2)).
 
@@ -242,11 +299,15 @@ def _mlp(layers: list[Params], x: jax.Array) -> jax.Array:
 # ----------------------------------------------------------------------------- model
 
 
-def encode(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
+def encode(
+    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "xla"
+) -> jax.Array:
     """Features for the MLPs: [..., D] -> [..., latent_size + n_vec] (latent || vec).
 
-    Without a map (``layout.map_shape == ()``) the obs is returned unchanged.
+    Without a map (``layout.map_shape == ()``) the obs is returned unchanged. ``conv_impl``
+    (NetworkConfig.conv_impl) picks how the 3x3 convs are computed, not what they compute.
     """
+    conv = _conv_fn(conv_impl)
     if not layout.map_shape:
         return obs
     if obs.shape[-1] != layout.obs_size:
@@ -257,7 +318,7 @@ def encode(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
     x = obs[..., layout.n_vec :].reshape(-1, *layout.map_shape, 1)
     n_conv = len(enc["conv"])
     for i, p in enumerate(enc["conv"]):
-        x = jax.nn.elu(_conv3x3(x, p))
+        x = jax.nn.elu(conv(x, p))
         if i < n_conv - 1:
             x = _maxpool2(x)
     n_flat = enc["proj"]["w"].shape[0]
@@ -277,24 +338,30 @@ def _pool_hw_from(n_flat: int, channels: int) -> tuple[int, int]:
     return side, side
 
 
-def actor_mean(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
+def actor_mean(
+    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "xla"
+) -> jax.Array:
     """Policy mean: [..., D] -> [..., A]."""
-    return _mlp(params["actor"], encode(params, obs, layout))
+    return _mlp(params["actor"], encode(params, obs, layout, conv_impl=conv_impl))
 
 
-def value(params: Params, obs: jax.Array, layout: ObsLayout) -> jax.Array:
+def value(
+    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "xla"
+) -> jax.Array:
     """State value from the privileged stream: [..., D] -> [...]."""
-    return _mlp(params["critic"], encode(params, obs, layout))[..., 0]
+    return _mlp(params["critic"], encode(params, obs, layout, conv_impl=conv_impl))[..., 0]
 
 
 def actor_critic(
-    params: Params, obs: jax.Array, critic_obs: jax.Array, layout: ObsLayout
+    params: Params, obs: jax.Array, critic_obs: jax.Array, layout: ObsLayout, *,
+    conv_impl: str = "xla",
 ) -> tuple[jax.Array, jax.Array]:
     """(actor_mean(obs), value(critic_obs)) with ONE pass of the shared encoder over both
     streams stacked on the batch axis: [N, D], [N, D] -> [N, A], [N]. The encoder's small
     kernels are launch- and memory-bound, so one call on 2N maps costs less than two on N."""
     n = obs.shape[0]
-    feats = encode(params, jnp.concatenate([obs, critic_obs], axis=0), layout)
+    feats = encode(params, jnp.concatenate([obs, critic_obs], axis=0), layout,
+                   conv_impl=conv_impl)
     return _mlp(params["actor"], feats[:n]), _mlp(params["critic"], feats[n:])[..., 0]
 
 

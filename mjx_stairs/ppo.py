@@ -80,12 +80,14 @@ def norm_obs(
 
 def policy_mean(params, norm, obs, net_cfg: NetworkConfig, layout: ObsLayout) -> jax.Array:
     """Actor mean from raw actor obs: [..., D] -> [..., A]."""
-    return networks.actor_mean(params, norm_obs(norm, "state", obs, net_cfg), layout)
+    return networks.actor_mean(params, norm_obs(norm, "state", obs, net_cfg), layout,
+                               conv_impl=net_cfg.conv_impl)
 
 
 def critic_value(params, norm, critic_obs, net_cfg: NetworkConfig, layout: ObsLayout) -> jax.Array:
     """Value from raw privileged obs: [..., D] -> [...]."""
-    return networks.value(params, norm_obs(norm, "privileged_state", critic_obs, net_cfg), layout)
+    return networks.value(params, norm_obs(norm, "privileged_state", critic_obs, net_cfg), layout,
+                          conv_impl=net_cfg.conv_impl)
 
 
 def policy_mean_and_value(
@@ -97,6 +99,7 @@ def policy_mean_and_value(
         norm_obs(norm, "state", obs, net_cfg),
         norm_obs(norm, "privileged_state", critic_obs, net_cfg),
         layout,
+        conv_impl=net_cfg.conv_impl,
     )
 
 

@@ -107,9 +107,9 @@ def test_file_errors_name_the_file(tmp_path):
 
 def test_json_round_trip_of_the_learner_config():
     cfg = load_config(LearnerConfig, None, ["ppo.learning_rate=3e-4", "network.actor_hidden=[64]",
-                                            "train.experiment=rt"])
+                                            "train.experiment=rt", "network.conv_impl=row"])
     d = to_dict(cfg)
-    assert d["network"]["actor_hidden"] == [64]
+    assert d["network"]["actor_hidden"] == [64] and d["network"]["conv_impl"] == "row"
     json.dumps(d)
     assert from_json(LearnerConfig, to_json(cfg)) == cfg
     assert from_dict(LearnerConfig, json.loads(json.dumps(d))) == cfg

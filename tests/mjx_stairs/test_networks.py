@@ -153,3 +153,39 @@ def test_fused_actor_critic_equals_separate_passes():
     ga, gb = jax.grad(fused)(p), jax.grad(separate)(p)
     for a, b in zip(jax.tree_util.tree_leaves(ga), jax.tree_util.tree_leaves(gb), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("n_vec,map_shape", [(49, (21, 21)), (3, (7, 9))])
+def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape):
+    """conv_impl='row' (row-Toeplitz matmuls) is the same function as lax.conv: features and
+    their gradients wrt every encoder param agree."""
+    layout = ObsLayout(n_vec, map_shape)
+    cfg = NetworkConfig(conv_channels=(4, 6, 8), latent_size=16, actor_hidden=(8,),
+                        critic_hidden=(8,))
+    p = _init(jax.random.PRNGKey(5), cfg, n_vec, map_shape, 2)
+    k = jax.random.split(jax.random.PRNGKey(6), 4)
+    # random (non-zero) biases so their gradients and the padding's interplay are tested
+    p["encoder"]["conv"] = [{"w": c["w"], "b": 0.3 * jax.random.normal(kk, c["b"].shape)}
+                            for c, kk in zip(p["encoder"]["conv"], k[:3], strict=True)]
+    obs = jax.random.normal(k[3], (5, layout.obs_size))
+    weights = jnp.cos(jnp.arange(cfg.latent_size + n_vec, dtype=jnp.float32))
+
+    def loss(params, impl):
+        feat = networks.encode(params, obs, layout, conv_impl=impl)
+        return jnp.sum(jnp.sin(feat) * weights), feat
+
+    grad = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+    (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, "row")
+    np.testing.assert_allclose(fb, fa, rtol=1e-5, atol=1e-5)
+    assert float(jnp.abs(fa[:, :16]).max()) > 0.0
+    for a, b in zip(jax.tree_util.tree_leaves(ga["encoder"]),
+                    jax.tree_util.tree_leaves(gb["encoder"]), strict=True):
+        assert float(jnp.abs(a).max()) > 0.0
+        np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-5)
+
+
+def test_unknown_conv_impl_is_a_one_line_error():
+    with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'.*'xla'.*'row'"):
+        networks.encode({}, jnp.zeros((2, 3)), ObsLayout(3), conv_impl="cudnn")
+    with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'"):
+        networks.init_params(jax.random.PRNGKey(0), NetworkConfig(conv_impl="cudnn"), 3, (), 2)

@@ -168,3 +168,19 @@ def test_update_runs_epochs_and_adapts_lr(setup):
     with pytest.raises(ValueError, match="does not split into 5 minibatches"):
         ppo.update(params, opt, norm, data, jax.random.PRNGKey(1),
                    dataclasses.replace(cfg, num_minibatches=5), NET, LAYOUT)
+
+
+def test_network_conv_impl_reaches_the_encoder(setup):
+    """net_cfg.conv_impl='row' is threaded through the PPO forward: same loss and gradients."""
+    params, norm = setup
+    cfg = PPOConfig()
+    batch = _batch(params, norm, value_shift=0.3)
+    row = dataclasses.replace(NET, conv_impl="row")
+    grad = jax.jit(jax.grad(ppo.ppo_loss, has_aux=True), static_argnums=(4, 5, 6))
+    ga, aux_a = grad(params, norm, batch, params["log_std"], cfg, NET, LAYOUT)
+    gb, aux_b = grad(params, norm, batch, params["log_std"], cfg, row, LAYOUT)
+    assert float(aux_b["loss/value"]) == pytest.approx(float(aux_a["loss/value"]), rel=1e-5)
+    for a, b in zip(jax.tree_util.tree_leaves(ga), jax.tree_util.tree_leaves(gb), strict=True):
+        np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-6)
+    with pytest.raises(ValueError, match="network.conv_impl"):
+        ppo.policy_mean(params, norm, batch.obs, dataclasses.replace(NET, conv_impl="x"), LAYOUT)

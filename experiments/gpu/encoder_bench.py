@@ -1,0 +1,91 @@
+"""Time the height-map encoder's forward + backward for each conv implementation.
+
+    python3 experiments/gpu/encoder_bench.py --batch 49152 --out /tmp/out/encoder_bench.json
+
+For conv_impl 'xla' (lax.conv, cuDNN on a GPU) and 'row' (row-Toeplitz matmuls), jits the grad
+of a scalar loss of ``networks.encode`` wrt the params (float32, the stair layout: 49 vec floats
++ a 21x21 map, default NetworkConfig) and reports the median ms of ``--repeats`` calls after
+warm-up. 'row' is also timed under jax.default_matmul_precision("float32"): if that is slower
+than the default, the default matmuls ran in TF32.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+
+from mjx_stairs import atomic, networks
+from mjx_stairs.networks import NetworkConfig, ObsLayout
+
+LAYOUT = ObsLayout(49, (21, 21))  # env.N_VEC, the 21 x 21 height scan
+
+
+def _time_ms(fn, args, repeats: int) -> float:
+    jax.block_until_ready(fn(*args))  # compile + warm-up
+    jax.block_until_ready(fn(*args))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append((time.perf_counter() - t) * 1e3)
+    return statistics.median(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--batch", type=int, default=49152, help="maps per call")
+    ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--out", required=True, help="JSON file to write")
+    args = ap.parse_args()
+
+    params = networks.init_params(jax.random.PRNGKey(0), NetworkConfig(), LAYOUT.n_vec,
+                                  LAYOUT.map_shape, 12)
+    obs = jax.random.normal(jax.random.PRNGKey(1), (args.batch, LAYOUT.obs_size), jnp.float32)
+
+    def make(impl):
+        def loss(p, o):
+            return jnp.sum(jnp.sin(networks.encode(p, o, LAYOUT, conv_impl=impl)))
+
+        return jax.jit(jax.grad(loss)), jax.jit(loss)
+
+    grads, rows = {}, {}
+    for name, impl, precision in (("xla", "xla", None), ("row", "row", None),
+                                  ("xla_fp32", "xla", "float32"),
+                                  ("row_fp32", "row", "float32")):
+        with jax.default_matmul_precision(precision):  # None: the default
+            g, f = make(impl)  # jit inside the context: precision is fixed at trace time
+            ms = _time_ms(g, (params, obs), args.repeats)
+            fwd = _time_ms(f, (params, obs), args.repeats)
+            grads[name] = g(params, obs)
+        rows[name] = {"conv_impl": impl, "matmul_precision": precision or "default",
+                      "fwd_bwd_ms": round(ms, 3), "fwd_ms": round(fwd, 3)}
+        print(f"{name:9s} fwd+bwd {ms:8.3f} ms   fwd {fwd:8.3f} ms", flush=True)
+
+    def max_rel_diff(a, b):
+        return max(float(jnp.max(jnp.abs(x - y)) / (jnp.max(jnp.abs(y)) + 1e-30))
+                   for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b),
+                                   strict=True))
+
+    result = {
+        "device": jax.devices()[0].device_kind,
+        "backend": jax.default_backend(),
+        "jax": jax.__version__,
+        "batch": args.batch,
+        "layout": {"n_vec": LAYOUT.n_vec, "map_shape": list(LAYOUT.map_shape)},
+        "repeats": args.repeats,
+        "timings": rows,
+        # grads vs the float32 lax.conv: how far each variant is from full precision
+        "grad_max_rel_diff_vs_xla_fp32": {k: max_rel_diff(g, grads["xla_fp32"])
+                                          for k, g in grads.items()},
+    }
+    atomic.write_text(args.out, json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
