@@ -13,7 +13,7 @@ comma := ,
 EXTRAS := dev$(if $(HAS_GPU),$(comma)cuda)
 ARGS ?=
 
-.PHONY: setup test lint train-stage1 train-stage2 ablation eval exp1 transfer-matrix bench clean-venv
+.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast ablation eval exp1 transfer-matrix bench clean-venv
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -34,6 +34,9 @@ train-stage1: $(SETUP)
 
 train-stage2: $(SETUP)
 	$(PY) -m mjx_stairs train experiments/stage2_u.toml $(ARGS)
+
+train-stage2-fast: $(SETUP)  # faster physics settings (issue 7), same stage-2 success
+	$(PY) -m mjx_stairs train experiments/stage2_u_fast.toml $(ARGS)
 
 ablation: $(SETUP)
 	$(PY) -m mjx_stairs train experiments/stage2_u_no_stall.toml $(ARGS)

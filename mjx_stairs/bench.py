@@ -132,6 +132,7 @@ def run_bench(
             "decimation": config.env.decimation,
             "shin_collision": config.env.robot.shin_collision,
         },
+        "network": {"conv_impl": config.network.conv_impl},
         "contacts": int(sum(r.size for r in env._contact_rows.values() if r is not None)),
         "results": [],
     }

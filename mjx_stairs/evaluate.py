@@ -153,7 +153,8 @@ def markdown_table(results: Sequence[dict[str, Any]]) -> str:
     for r in results:
         by = dict(zip(r["levels"], r["success"], strict=True))
         cells = [f"{100 * by[lv]:.1f}" if lv in by else "" for lv in levels]
-        name = Path(r.get("checkpoint", "")).parent.name or r.get("checkpoint", "")
+        path = Path(r.get("checkpoint", ""))  # a published run's dir/policy.npz: the dir
+        name = (path.parent.name if path.name == "policy.npz" else path.stem) or str(path)
         if r.get("env_overrides"):
             name += " (" + ", ".join(r["env_overrides"]) + ")"
         rows.append(f"| {name} | {r['family']} | " + " | ".join(cells) + " |")

@@ -72,9 +72,10 @@ class NetworkConfig:
         default=10.0, metadata={"help": "clip normalised observations to +-obs_clip (0 = off)"}
     )
     conv_impl: str = field(
-        default="xla",
-        metadata={"help": "'xla' (lax.conv) or 'row' (row-Toeplitz matmul: same function, "
-                  "faster on GPUs for these tiny maps)"},
+        default="auto",
+        metadata={"help": "'xla' (lax.conv), 'row' (row-Toeplitz matmul: same function, "
+                  "faster on GPUs for these tiny maps: 7.0 vs 10.6 ms fwd+bwd on an H100) or "
+                  "'auto' (row on a GPU, xla elsewhere)"},
     )
 
 
@@ -258,11 +259,13 @@ CONV_IMPLS = {"xla": _conv3x3, "row": _conv3x3_row}
 
 
 def _conv_fn(conv_impl: str):
+    if conv_impl == "auto":  # resolved when traced: the backend the function compiles for
+        conv_impl = "row" if jax.default_backend() == "gpu" else "xla"
     try:
         return CONV_IMPLS[conv_impl]
     except (KeyError, TypeError):
         raise ValueError(f"network.conv_impl: unknown conv_impl {conv_impl!r} (expected one of "
-                         f"{', '.join(repr(k) for k in CONV_IMPLS)})") from None
+                         f"{', '.join(repr(k) for k in (*CONV_IMPLS, 'auto'))})") from None
 
 
 def _maxpool2(x: jax.Array) -> jax.Array:
@@ -300,7 +303,7 @@ def _mlp(layers: list[Params], x: jax.Array) -> jax.Array:
 
 
 def encode(
-    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "xla"
+    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "auto"
 ) -> jax.Array:
     """Features for the MLPs: [..., D] -> [..., latent_size + n_vec] (latent || vec).
 
@@ -339,14 +342,14 @@ def _pool_hw_from(n_flat: int, channels: int) -> tuple[int, int]:
 
 
 def actor_mean(
-    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "xla"
+    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "auto"
 ) -> jax.Array:
     """Policy mean: [..., D] -> [..., A]."""
     return _mlp(params["actor"], encode(params, obs, layout, conv_impl=conv_impl))
 
 
 def value(
-    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "xla"
+    params: Params, obs: jax.Array, layout: ObsLayout, *, conv_impl: str = "auto"
 ) -> jax.Array:
     """State value from the privileged stream: [..., D] -> [...]."""
     return _mlp(params["critic"], encode(params, obs, layout, conv_impl=conv_impl))[..., 0]
@@ -354,7 +357,7 @@ def value(
 
 def actor_critic(
     params: Params, obs: jax.Array, critic_obs: jax.Array, layout: ObsLayout, *,
-    conv_impl: str = "xla",
+    conv_impl: str = "auto",
 ) -> tuple[jax.Array, jax.Array]:
     """(actor_mean(obs), value(critic_obs)) with ONE pass of the shared encoder over both
     streams stacked on the batch axis: [N, D], [N, D] -> [N, A], [N]. The encoder's small

@@ -70,8 +70,7 @@ for step in "$@"; do
     stage2-fast)  # issue 7's fidelity check: stage 2 with the faster settings (row encoder, no
       # shin spheres, 3 line-search steps), then evaluated in the reference physics it was not
       # trained in (shins on, 5 line-search steps), 1000 robots per level
-      train stage2_u_fast experiments/stage2_u.toml train.experiment=stage2_u_fast \
-        network.conv_impl=row env.robot.shin_collision=false env.robot.ls_iterations=3
+      train stage2_u_fast experiments/stage2_u_fast.toml
       python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_fast.npz --robots 1000 \
         --env robot.shin_collision=true robot.ls_iterations=5 \
         --out "$OUT/stage2_u_fast/eval_reference_physics" 2>&1 | grep -v warp ;;
@@ -88,12 +87,11 @@ for step in "$@"; do
           --parts physics --repeats 3 ${v#*:} --out "$OUT/bench/a_${v%%:*}.json" 2>&1 | grep -v warp
       done ;;
     bench4096-row) mkdir -p "$OUT/bench"; python3 -m mjx_stairs bench --config \
-        experiments/stage2_u.toml --robots 4096 network.conv_impl=row \
+        experiments/stage2_u.toml network.conv_impl=row --robots 4096 \
         --out "$OUT/bench/abc_row.json" 2>&1 | grep -v warp ;;
     bench4096-fast) mkdir -p "$OUT/bench"; python3 -m mjx_stairs bench --config \
-        experiments/stage2_u.toml --robots 4096 network.conv_impl=row \
-        env.robot.shin_collision=false env.robot.ls_iterations=3 \
-        --out "$OUT/bench/abc_fast.json" 2>&1 | grep -v warp ;;
+        experiments/stage2_u.toml network.conv_impl=row env.robot.shin_collision=false \
+        env.robot.ls_iterations=3 --robots 4096 --out "$OUT/bench/abc_fast.json" 2>&1 | grep -v warp ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 import pytest
@@ -130,3 +131,21 @@ def test_describe_lists_every_leaf_with_help():
     rows = {r[0]: r for r in describe(LearnerConfig)}
     assert rows["ppo.learning_rate"][2] == 1e-3
     assert all(r[3] for r in rows.values()), [k for k, r in rows.items() if not r[3]]
+
+
+EXPERIMENT_FILES = sorted(
+    p for p in Path("experiments").glob("*.toml") if p.name != "transfer_matrix.toml"
+)
+
+
+@pytest.mark.parametrize("path", EXPERIMENT_FILES, ids=lambda p: p.name)
+def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
+    from mjx_stairs import experiment
+
+    for cpu in (False, True):
+        cfg, _ = experiment.load(path, [], cpu=cpu)
+        assert cfg.train.num_envs > 0
+    cfg, _ = experiment.load(path, [], cpu=False)
+    fast = path.name == "stage2_u_fast.toml"
+    assert cfg.env.robot.shin_collision is not fast
+    assert cfg.env.robot.ls_iterations == (3 if fast else 5)

@@ -184,8 +184,14 @@ def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape):
         np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-5)
 
 
+def test_auto_conv_impl_picks_by_backend():
+    assert NetworkConfig().conv_impl == "auto"
+    want = networks.CONV_IMPLS["row" if jax.default_backend() == "gpu" else "xla"]
+    assert networks._conv_fn("auto") is want
+
+
 def test_unknown_conv_impl_is_a_one_line_error():
-    with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'.*'xla'.*'row'"):
+    with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'.*'xla'.*'row'.*'auto'"):
         networks.encode({}, jnp.zeros((2, 3)), ObsLayout(3), conv_impl="cudnn")
     with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'"):
         networks.init_params(jax.random.PRNGKey(0), NetworkConfig(conv_impl="cudnn"), 3, (), 2)
