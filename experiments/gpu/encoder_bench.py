@@ -6,7 +6,8 @@ For conv_impl 'xla' (lax.conv, cuDNN on a GPU) and 'row' (row-Toeplitz matmuls),
 of a scalar loss of ``networks.encode`` wrt the params (float32, the stair layout: 49 vec floats
 + a 21x21 map, default NetworkConfig) and reports the median ms of ``--repeats`` calls after
 warm-up. 'row' is also timed under jax.default_matmul_precision("float32"): if that is slower
-than the default, the default matmuls ran in TF32.
+than the default, the default matmuls ran in TF32. 'row_bf16' (bfloat16 operands, float32
+accumulation) is timed beside them; its gradient difference says what the rounding costs.
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ def main() -> None:
     grads, rows = {}, {}
     for name, impl, precision in (("xla", "xla", None), ("row", "row", None),
                                   ("xla_fp32", "xla", "float32"),
-                                  ("row_fp32", "row", "float32")):
+                                  ("row_fp32", "row", "float32"),
+                                  ("row_bf16", "row_bf16", None)):
         with jax.default_matmul_precision(precision):  # None: the default
             g, f = make(impl)  # jit inside the context: precision is fixed at trace time
             ms = _time_ms(g, (params, obs), args.repeats)

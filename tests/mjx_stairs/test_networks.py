@@ -184,6 +184,19 @@ def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape):
         np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-5)
 
 
+def test_row_bf16_encoder_is_close_to_float32():
+    """conv_impl='row_bf16' rounds the conv operands to bfloat16: close to, not equal to, xla."""
+    layout = ObsLayout(3, (21, 21))
+    cfg = NetworkConfig(latent_size=16, actor_hidden=(8,), critic_hidden=(8,))
+    p = _init(jax.random.PRNGKey(7), cfg, 3, (21, 21), 2)
+    obs = jax.random.normal(jax.random.PRNGKey(8), (6, layout.obs_size))
+    fa = networks.encode(p, obs, layout, conv_impl="xla")
+    fb = networks.encode(p, obs, layout, conv_impl="row_bf16")
+    assert fb.dtype == jnp.float32
+    err = float(jnp.abs(fb - fa).max() / jnp.abs(fa).max())
+    assert 0.0 < err < 3e-2, err
+
+
 def test_auto_conv_impl_picks_by_backend():
     assert NetworkConfig().conv_impl == "auto"
     want = networks.CONV_IMPLS["row" if jax.default_backend() == "gpu" else "xla"]
