@@ -242,33 +242,28 @@ def _row_toeplitz(k: jax.Array, w: int) -> jax.Array:
     return t.reshape(3 * w * c_in, w * c_out)
 
 
-def _conv3x3_row(x: jax.Array, p: Params) -> jax.Array:
+def _conv3x3_row(x: jax.Array, p: Params, operand_dtype: Any = jnp.float32) -> jax.Array:
     """``_conv3x3`` as one batched matmul (row-Toeplitz): [N, H, W, Cin] -> [N, H, W, Cout].
 
     Rows h-1, h, h+1 (zero rows past the edges) are concatenated into [N, H, 3 W Cin] and
     multiplied by ``_row_toeplitz``, which holds the width shifts and their zero padding. For
-    these tiny maps a dense matmul beats cuDNN's launch- and layout-bound small convs."""
+    these tiny maps a dense matmul beats cuDNN's launch- and layout-bound small convs.
+    ``operand_dtype`` bfloat16 rounds both matmul operands (float32 accumulation, the tensor
+    cores' fast path): NOT the same function then."""
     n, h, w, c_in = x.shape
     c_out = p["w"].shape[-1]
-    xp = jnp.pad(x.reshape(n, h, w * c_in), ((0, 0), (1, 1), (0, 0)))
+    xp = jnp.pad(x.reshape(n, h, w * c_in).astype(operand_dtype), ((0, 0), (1, 1), (0, 0)))
     rows = jnp.concatenate([xp[:, :h], xp[:, 1 : h + 1], xp[:, 2:]], axis=-1)
-    y = rows @ _row_toeplitz(p["w"], w)
-    return y.reshape(n, h, w, c_out) + p["b"]
-
-
-def _conv3x3_row_bf16(x: jax.Array, p: Params) -> jax.Array:
-    """``_conv3x3_row`` with bfloat16 operands and float32 accumulation (the tensor cores' fast
-    path): NOT the same function -- inputs and weights are rounded to 8 mantissa bits."""
-    n, h, w, c_in = x.shape
-    c_out = p["w"].shape[-1]
-    xp = jnp.pad(x.reshape(n, h, w * c_in).astype(jnp.bfloat16), ((0, 0), (1, 1), (0, 0)))
-    rows = jnp.concatenate([xp[:, :h], xp[:, 1 : h + 1], xp[:, 2:]], axis=-1)
-    t = _row_toeplitz(p["w"], w).astype(jnp.bfloat16)
+    t = _row_toeplitz(p["w"], w).astype(operand_dtype)
     y = jnp.matmul(rows, t, preferred_element_type=jnp.float32)
     return y.reshape(n, h, w, c_out) + p["b"]
 
 
-CONV_IMPLS = {"xla": _conv3x3, "row": _conv3x3_row, "row_bf16": _conv3x3_row_bf16}
+CONV_IMPLS = {
+    "xla": _conv3x3,
+    "row": _conv3x3_row,
+    "row_bf16": functools.partial(_conv3x3_row, operand_dtype=jnp.bfloat16),
+}
 
 
 def _conv_fn(conv_impl: str):

@@ -51,12 +51,16 @@ for r in rows[:: max(1, len(rows) // 12)] + rows[-1:]:
 PY
 }
 
+bench() {  # bench OUT_FILE CONFIG [overrides and options...]
+  local out=$1 toml=$2; shift 2; mkdir -p "$(dirname "$out")"
+  python3 -m mjx_stairs bench --config "$toml" "$@" --out "$out" 2>&1 | grep -v warp
+}
+
 for step in "$@"; do
   case $step in
-    bench-quick) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
-        --parts physics,env --repeats 3 --out "$OUT/bench_quick.json" 2>&1 | grep -v warp ;;
-    bench) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 16384 \
-        --out "$OUT/bench.json" 2>&1 | grep -v warp ;;
+    bench-quick) bench "$OUT/bench_quick.json" experiments/stage2_u.toml --robots 4096 \
+        --parts physics,env --repeats 3 ;;
+    bench) bench "$OUT/bench.json" experiments/stage2_u.toml --robots 4096 16384 ;;
     stage1) train stage1 experiments/stage1.toml ;;
     stage2) train stage2_u experiments/stage2_u.toml ;;
     stage2-final-goal) train stage2_u_final_goal experiments/stage2_u_final_goal.toml ;;
@@ -74,24 +78,21 @@ for step in "$@"; do
       python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_fast.npz --robots 1000 \
         --env robot.shin_collision=true robot.ls_iterations=5 \
         --out "$OUT/stage2_u_fast/eval_reference_physics" 2>&1 | grep -v warp ;;
-    bench4096) python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
-        --out "$OUT/bench_4096.json" 2>&1 | grep -v warp ;;
+    bench4096) bench "$OUT/bench_4096.json" experiments/stage2_u.toml --robots 4096 ;;
     # issue 7's levers, all into $OUT/bench/ (one tar after pack): the encoder alone (xla vs row
     # convolutions), physics-only (a) for each physics setting, and (a)+(b)+(c) with the row
     # encoder, with and without the faster physics settings
     encoder) mkdir -p "$OUT/bench"; python3 experiments/gpu/encoder_bench.py --batch 49152 \
         --out "$OUT/bench/encoder.json" 2>&1 | grep -v warp ;;
-    levers) mkdir -p "$OUT/bench"
+    levers)
       for v in "noshin:env.robot.shin_collision=false" "ls3:env.robot.ls_iterations=3"; do
-        python3 -m mjx_stairs bench --config experiments/stage2_u.toml --robots 4096 \
-          --parts physics --repeats 3 ${v#*:} --out "$OUT/bench/a_${v%%:*}.json" 2>&1 | grep -v warp
+        bench "$OUT/bench/a_${v%%:*}.json" experiments/stage2_u.toml ${v#*:} --robots 4096 \
+          --parts physics --repeats 3
       done ;;
-    bench4096-row) mkdir -p "$OUT/bench"; python3 -m mjx_stairs bench --config \
-        experiments/stage2_u.toml network.conv_impl=row --robots 4096 \
-        --out "$OUT/bench/abc_row.json" 2>&1 | grep -v warp ;;
-    bench4096-fast) mkdir -p "$OUT/bench"; python3 -m mjx_stairs bench --config \
-        experiments/stage2_u.toml network.conv_impl=row env.robot.shin_collision=false \
-        env.robot.ls_iterations=3 --robots 4096 --out "$OUT/bench/abc_fast.json" 2>&1 | grep -v warp ;;
+    bench4096-row) bench "$OUT/bench/abc_row.json" experiments/stage2_u.toml \
+        network.conv_impl=row --robots 4096 ;;
+    bench4096-fast) bench "$OUT/bench/abc_fast.json" experiments/stage2_u_fast.toml \
+        network.conv_impl=row --robots 4096 ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out
