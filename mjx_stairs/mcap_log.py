@@ -349,6 +349,8 @@ def robot_entities(model: mujoco.MjModel, prefix: str) -> list[dict[str, Any]]:
                 d = 2 * size[0]
                 spheres.append({"pose": pose, "size": {"x": d, "y": d, "z": d},
                                 "color": _rgba(rgba)})
+            elif kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:  # robot.terrain_contacts="nearest"
+                spheres.append({"pose": pose, "size": _v3(2 * size), "color": _rgba(rgba)})
         if cubes or cylinders or spheres:
             body = model.body(b).name
             entities.append({

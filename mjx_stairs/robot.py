@@ -18,6 +18,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from mjx_stairs import contact  # noqa: F401  (registers the 'nearest' terrain collider)
+
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
 
 LEGS = ("FL", "FR", "RL", "RR")
@@ -70,6 +72,9 @@ class RobotConfig:
     solver_iterations: int = 1  # Newton iterations per physics step
     ls_iterations: int = 5  # line-search iterations per Newton iteration
     shin_collision: bool = True  # collide the mid-shin spheres with the terrain
+    # Sphere-terrain collider: "mjx" (MJX's prism collider, 4 contacts per sphere) or "nearest"
+    # (mjx_stairs.contact: the exact nearest surface point, 2 contacts per sphere).
+    terrain_contacts: str = "mjx"
     friction: float = 0.8  # foot-terrain sliding friction
 
 
@@ -147,6 +152,17 @@ def build_mj_model(
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0
+    if config.terrain_contacts == "nearest":
+        # The same spheres as ellipsoids with equal radii: MJX then collides them with the
+        # terrain through mjx_stairs.contact (registered for heightfield-ellipsoid pairs).
+        for name in (n for group in SPHERE_GROUPS.values() for n in group):
+            geom = spec.geom(name)
+            geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
+            geom.size = [geom.size[0]] * 3
+    elif config.terrain_contacts != "mjx":
+        raise ValueError(
+            f"robot.terrain_contacts must be 'mjx' or 'nearest', got {config.terrain_contacts!r}"
+        )
     return spec.compile()
 
 

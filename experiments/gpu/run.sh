@@ -3,9 +3,9 @@
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
 # Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, encoder,
-# levers, bench4096-row, bench4096-fast, stage1,
+# levers, bench4096-row, bench4096-fast, levers-nearest, bench4096-lean, stage1,
 # stage2, ablation, stage2-fast, stage2-final-goal, stage2-pair (stage 2 and its
-# ablation side by side on one GPU, same wall budget each), report. Each training step stops and
+# ablation side by side on one GPU, same wall budget each), stage2-lean, eval-lean, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -93,6 +93,22 @@ for step in "$@"; do
         network.conv_impl=row --robots 4096 ;;
     bench4096-fast) bench "$OUT/bench/abc_fast.json" experiments/stage2_u_fast.toml \
         network.conv_impl=row --robots 4096 ;;
+    # the nearest-point terrain collider (robot.terrain_contacts=nearest): physics only with the
+    # reference settings otherwise, then (a)+(b)+(c) with the lean settings (stage2_u_lean.toml)
+    levers-nearest) bench "$OUT/bench/a_nearest.json" experiments/stage2_u.toml \
+        env.robot.terrain_contacts=nearest --robots 4096 --parts physics --repeats 3 ;;
+    bench4096-lean) bench "$OUT/bench/abc_lean.json" experiments/stage2_u_lean.toml \
+        --robots 4096 ;;
+    stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;
+    eval-lean)  # the lean-trained policy in the reference physics, and the reference policy in
+      # the lean physics's collider (shins on, 5 line-search steps), 1000 robots per level
+      p=/tmp/policies/stage2_u_lean.npz; [ -f "$p" ] || p=.carry/stage2_u_lean/policy.npz
+      python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
+        --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
+        --out "$OUT/stage2_u_lean/eval_reference_physics" 2>&1 | grep -v warp
+      python3 -m mjx_stairs eval --checkpoint experiments/results/stage2_u/policy.npz \
+        --robots 1000 --env robot.terrain_contacts=nearest \
+        --out "$OUT/stage2_u_lean/eval_stage2_u_in_nearest" 2>&1 | grep -v warp ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out

@@ -100,10 +100,11 @@ def test_stands_on_flat_heightfield(flat_model):
     assert np.linalg.norm(final[:2] - landed[:2]) < 0.05
 
 
-def test_foot_pressed_into_step_is_pushed_out():
+@pytest.mark.parametrize("terrain_contacts", ["mjx", "nearest"])
+def test_foot_pressed_into_step_is_pushed_out(terrain_contacts):
     heights = np.zeros((161, 161), np.float32)
     heights[:, 60:] = 0.10  # a 10 cm step for x >= 3 m
-    model = rb.build_mj_model(heights, RES)
+    model = rb.build_mj_model(heights, RES, rb.RobotConfig(terrain_contacts=terrain_contacts))
     data = mujoco.MjData(model)
     data.qpos[:] = rb.standing_qpos((5.0, 4.0), 0.0)
     mujoco.mj_kinematics(model, data)
