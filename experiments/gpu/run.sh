@@ -99,7 +99,18 @@ for step in "$@"; do
         env.robot.terrain_contacts=nearest --robots 4096 --parts physics --repeats 3 ;;
     bench4096-lean) bench "$OUT/bench/abc_lean.json" experiments/stage2_u_lean.toml \
         --robots 4096 ;;
+    bench4096-nearest) bench "$OUT/bench/abc_nearest.json" experiments/stage2_u.toml \
+        env.robot.terrain_contacts=nearest --robots 4096 ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;
+    stage1-lean) train stage1_lean experiments/stage1_lean.toml ;;
+    stage2-lean-s1)  # stage 2 with the lean settings from the lean stage 1, then evaluated in the
+      # reference physics
+      s1=/tmp/policies/stage1_lean.npz; [ -f "$s1" ] || s1=.carry/stage1_lean/policy.npz
+      train stage2_u_lean_s1 experiments/stage2_u_lean.toml init_from="$s1" \
+        train.experiment=stage2_u_lean_s1
+      python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_lean_s1.npz --robots 1000 \
+        --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
+        --out "$OUT/stage2_u_lean_s1/eval_reference_physics" 2>&1 | grep -v warp ;;
     eval-lean)  # the lean-trained policy in the reference physics, and the reference policy in
       # the lean physics's collider (shins on, 5 line-search steps), 1000 robots per level
       p=/tmp/policies/stage2_u_lean.npz; [ -f "$p" ] || p=.carry/stage2_u_lean/policy.npz

@@ -146,6 +146,9 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
         cfg, _ = experiment.load(path, [], cpu=cpu)
         assert cfg.train.num_envs > 0
     cfg, _ = experiment.load(path, [], cpu=False)
-    fast = path.name == "stage2_u_fast.toml"
+    # the physics settings each file says it has: reference, fast, or lean (fast + nearest)
+    lean = path.name.endswith("_lean.toml")
+    fast = lean or path.name == "stage2_u_fast.toml"
     assert cfg.env.robot.shin_collision is not fast
     assert cfg.env.robot.ls_iterations == (3 if fast else 5)
+    assert cfg.env.robot.terrain_contacts == ("nearest" if lean else "mjx")
