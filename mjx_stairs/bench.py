@@ -131,6 +131,7 @@ def run_bench(
             "timestep": config.env.robot.timestep,
             "decimation": config.env.decimation,
             "shin_collision": config.env.robot.shin_collision,
+            "terrain_contacts": config.env.robot.terrain_contacts,
         },
         "network": {"conv_impl": config.network.conv_impl},
         "contacts": int(sum(r.size for r in env._contact_rows.values() if r is not None)),

@@ -101,6 +101,8 @@ for step in "$@"; do
         --robots 4096 ;;
     bench4096-nearest) bench "$OUT/bench/abc_nearest.json" experiments/stage2_u.toml \
         env.robot.terrain_contacts=nearest --robots 4096 ;;
+    bench16384-lean) bench "$OUT/bench/abc_lean_16384.json" experiments/stage2_u_lean.toml \
+        --robots 16384 ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;
     stage1-lean) train stage1_lean experiments/stage1_lean.toml ;;
     stage2-lean-s1)  # stage 2 with the lean settings from the lean stage 1, then evaluated in the
