@@ -186,3 +186,15 @@ def test_env_with_nearest_contacts_reads_foot_contacts():
         assert np.all(geom[rows[k]] == [env._ids.hfield_geom, g])
     assert bool(state.info["last_foot_contact"].all())
     assert float(state.pipeline_state.qpos[2]) > 0.2
+
+
+def test_spheres_off_the_grid_and_far_above_give_finite_inactive_contacts():
+    z = np.zeros((NX, NY), np.float32)
+    size = np.array([0.5 * (NX - 1) * CELL, 0.5 * (NY - 1) * CELL, 1.0, 0.1])
+    h = HFieldInfo(jnp.zeros(3), jnp.eye(3), size, NY, NX, jnp.asarray(z))
+    r = 0.02
+    for p in ([5.0, -3.0, 0.01], [0.0, 0.0, 3.0], [-0.2, 0.15, 0.5]):
+        dist, pos, frame = contact.sphere_heightfield(
+            h, GeomInfo(jnp.array(p), jnp.eye(3), jnp.array([r, r, r])), (3, 3))
+        assert all(np.all(np.isfinite(np.asarray(a))) for a in (dist, pos, frame))
+        assert np.all(np.asarray(dist) > 0), (p, dist)
