@@ -81,6 +81,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
         episode_length_s=args.episode_s,
         seed=args.seed,
         resolution=args.resolution,
+        env_overrides=tuple(args.env),
     )
     if args.config is None:  # the whole experiment: train what is missing, then the matrix
         transfer.run_pipeline(spec, force=args.force)
@@ -294,6 +295,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--episode-s", type=float, default=20.0)
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--resolution", type=float, default=0.025)
+    m.add_argument(
+        "--env", nargs="+", default=[], metavar="KEY=VALUE",
+        help="override every model's env config, keys under [env], e.g. "
+        "robot.terrain_contacts=mjx (evaluate all models in one physics)",
+    )
     m.add_argument("--out", default="experiments/results/transfer")
     m.set_defaults(fn=cmd_transfer)
 

@@ -70,6 +70,7 @@ def matrix(
         "mean_success": mean,
         "transferability": transfer,
         "paper": {"table1_u_model": PAPER_TABLE1, "table2_onto_u": PAPER_TABLE2},
+        **({"env_overrides": list(spec.env_overrides)} if spec.env_overrides else {}),
     }
     if out_dir is not None:
         d = Path(out_dir)
@@ -99,7 +100,10 @@ def markdown(result: dict[str, Any]) -> str:
             rows.append(f"| {s} | " + " | ".join(f"{100 * values[s][d]:.1f}" for d in fams) + " |")
         return rows
 
-    lines = [f"Success (%), mean over test levels {lv}; rows: trained on, columns: tested on.", ""]
+    lines = [f"Success (%), mean over test levels {lv}; rows: trained on, columns: tested on."]
+    if result.get("env_overrides"):
+        lines.append("Every model evaluated with " + ", ".join(result["env_overrides"]) + ".")
+    lines.append("")
     lines += table(result["mean_success"])
     lines += ["", "Transferability S_model(stairs) / S_stairs-model(stairs):", ""]
     lines += table(result["transferability"])

@@ -5,7 +5,9 @@
 # Steps (end with pack, since only 8 files come back): bench-quick, bench, bench4096, encoder,
 # levers, bench4096-row, bench4096-fast, levers-nearest, bench4096-lean, stage1,
 # stage2, ablation, stage2-fast, stage2-final-goal, stage2-pair (stage 2 and its
-# ablation side by side on one GPU, same wall budget each), stage2-lean, eval-lean, report. Each training step stops and
+# ablation side by side on one GPU, same wall budget each), stage2-lean, eval-lean, stage1-lean,
+# stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
+# transfer-lean, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -113,6 +115,23 @@ for step in "$@"; do
       python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_lean_s1.npz --robots 1000 \
         --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
         --out "$OUT/stage2_u_lean_s1/eval_reference_physics" 2>&1 | grep -v warp ;;
+    # the transfer matrix with the lean physics: each family's model trained as stage2_u_lean
+    # (from the reference stage-1 policy; TRAIN_ARGS=train.total_iterations=290 for its budget),
+    # then every model on every family at test levels 3-4, all evaluated in the reference physics
+    straight-lean|l-shaped-lean|spiral-lean)
+      fam=${step%-lean}; fam=${fam//-/_}
+      train "$fam" "experiments/$fam.toml" env.robot.terrain_contacts=nearest \
+        env.robot.shin_collision=false env.robot.ls_iterations=3 ;;
+    transfer-lean)
+      models=/tmp/transfer_models.toml; echo "[models]" > $models
+      echo "u_shaped = \"experiments/results/stage2_u_lean/policy.npz\"" >> $models
+      for fam in straight l_shaped spiral; do
+        p=/tmp/policies/$fam.npz; [ -f "$p" ] || p=.carry/$fam/policy.npz
+        echo "$fam = \"$p\"" >> $models
+      done
+      python3 -m mjx_stairs transfer-matrix --config $models --robots 1000 \
+        --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
+        --out "$OUT/transfer_lean" 2>&1 | grep -v warp ;;
     eval-lean)  # the lean-trained policy in the reference physics, and the reference policy in
       # the lean physics's collider (shins on, 5 line-search steps), 1000 robots per level
       p=/tmp/policies/stage2_u_lean.npz; [ -f "$p" ] || p=.carry/stage2_u_lean/policy.npz

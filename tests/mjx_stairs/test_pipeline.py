@@ -96,10 +96,13 @@ def test_transfer_matrix_and_transferability(trained, tmp_path):
     assert t["u"]["s"] == pytest.approx(0.9 / 0.95) and t["s"]["u"] == pytest.approx(0.02 / 0.8)
     assert math.isnan(transfer.transferability({"a": {"a": 0.0}})["a"]["a"])
     path = str(trained / "stage1" / "policy.npz")
-    spec = evaluate.EvalSpec(levels=(2,), robots_per_level=2, episode_length_s=1.0, resolution=0.05)
+    spec = evaluate.EvalSpec(levels=(2,), robots_per_level=2, episode_length_s=1.0, resolution=0.05,
+                             env_overrides=("robot.terrain_contacts=nearest",))
     result = transfer.matrix({"straight": path}, spec, tmp_path)
     assert result["levels"] == [3]
-    assert "Transferability" in (tmp_path / "transfer.md").read_text()
+    assert result["env_overrides"] == ["robot.terrain_contacts=nearest"]
+    md = (tmp_path / "transfer.md").read_text()
+    assert "Transferability" in md and "evaluated with robot.terrain_contacts=nearest" in md
     with pytest.raises(Exception, match="unknown stair family"):
         bad = tmp_path / "bad.toml"
         bad.write_text('[models]\nzigzag = "x.npz"\n')
@@ -120,6 +123,7 @@ def test_bench_measures_physics_and_env():
     row = out["results"][0]
     assert row["physics"]["steps_per_s"] > 0 and row["env"]["steps_per_s"] > 0
     assert out["contacts"] == 64  # 16 spheres x 4 heightfield contacts
+    assert out["solver"]["terrain_contacts"] == "mjx"
 
 
 def test_cli_errors_are_one_line(capsys, tmp_path):
