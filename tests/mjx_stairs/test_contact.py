@@ -198,3 +198,28 @@ def test_spheres_off_the_grid_and_far_above_give_finite_inactive_contacts():
             h, GeomInfo(jnp.array(p), jnp.eye(3), jnp.array([r, r, r])), (3, 3))
         assert all(np.all(np.isfinite(np.asarray(a))) for a in (dist, pos, frame))
         assert np.all(np.asarray(dist) > 0), (p, dist)
+
+
+def test_mujoco_c_steps_the_nearest_model_like_the_sphere_model():
+    """play and export step the model in MuJoCo C, which collides ellipsoids through its general
+    convex path: on the slope the ellipsoid model follows the sphere model to a few millimetres."""
+    x = np.arange(161) * RES
+    heights = np.tile(np.tan(np.radians(10.0)) * x, (161, 1)).astype(np.float32)
+    q0 = rb.standing_qpos((4.0, 4.0), np.tan(np.radians(10.0)) * 4.0 + 0.34)
+    trajs = {}
+    for kind in ("mjx", "nearest"):
+        model = rb.build_mj_model(heights, RES, rb.RobotConfig(terrain_contacts=kind))
+        ids = rb.robot_ids(model)
+        data = mujoco.MjData(model)
+        data.qpos[:] = q0
+        traj = []
+        for _ in range(400):
+            data.ctrl[:] = rb.pd_torque(rb.NOMINAL_JOINT_POS, data.qpos[ids.qpos_joints],
+                                        data.qvel[ids.qvel_joints], 35.0, 1.0, rb.TORQUE_LIMIT)
+            mujoco.mj_step(model, data)
+            traj.append(data.qpos.copy())
+        trajs[kind] = np.array(traj)[[100, 200, 399]]
+    a, b = trajs["mjx"], trajs["nearest"]
+    assert 0.1 < 4.0 - a[-1, 0] < 0.3  # slid downhill, as in MJX
+    np.testing.assert_allclose(a[:, :3], b[:, :3], atol=0.005)
+    np.testing.assert_allclose(a[:, 3:7], b[:, 3:7], atol=0.01)
