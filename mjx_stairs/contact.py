@@ -80,7 +80,9 @@ def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     ncol, nrow = h.ncol, h.nrow
     dx = 2.0 * h.size[0] / (ncol - 1)
     dy = 2.0 * h.size[1] / (nrow - 1)
-    z = h.data * h.size[2]  # [ncol, nrow], MJX's layout: z[ix, iy]
+
+    def z(i, j):  # heights at grid points; MJX's layout is data[ix, iy]. Gather, then scale:
+        return h.data[i, j] * h.size[2]  # never the whole field
 
     # The grid cells under the sphere: the same sub-grid MJX sizes from the bounding radius.
     c0 = jnp.floor((p[0] - r + h.size[0]) / dx).astype(jnp.int32)
@@ -92,18 +94,16 @@ def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     x0 = ci * dx - h.size[0]
     y0 = ri * dy - h.size[1]
     x1, y1 = x0 + dx, y0 + dy
-    v00 = jnp.stack([x0, y0, z[ci, ri]], -1)
-    v10 = jnp.stack([x1, y0, z[ci + 1, ri]], -1)
-    v01 = jnp.stack([x0, y1, z[ci, ri + 1]], -1)
-    v11 = jnp.stack([x1, y1, z[ci + 1, ri + 1]], -1)
+    v00 = jnp.stack([x0, y0, z(ci, ri)], -1)
+    v10 = jnp.stack([x1, y0, z(ci + 1, ri)], -1)
+    v01 = jnp.stack([x0, y1, z(ci, ri + 1)], -1)
+    v11 = jnp.stack([x1, y1, z(ci + 1, ri + 1)], -1)
     # MuJoCo's split of a cell: (00, 11, 01) above the diagonal, (00, 10, 11) below it.
     a = jnp.concatenate([v00, v00])
     b = jnp.concatenate([v11, v10])
     c = jnp.concatenate([v01, v11])
     q = _closest_on_triangles(p, a, b, c)  # [T, 3]
     d = jnp.linalg.norm(q - p, axis=-1)  # [T]
-    face_n = jnp.cross(b - a, c - a)
-    face_n = face_n / jnp.linalg.norm(face_n, axis=-1, keepdims=True)  # up (+z) for both halves
 
     # Is the centre under the surface? The surface height at the centre's (x, y).
     fx = jnp.clip((p[0] + h.size[0]) / dx, 0.0, ncol - 1.0)
@@ -111,14 +111,16 @@ def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     ic = jnp.clip(jnp.floor(fx).astype(jnp.int32), 0, ncol - 2)
     ir = jnp.clip(jnp.floor(fy).astype(jnp.int32), 0, nrow - 2)
     u, w = fx - ic, fy - ir
-    z00, z10, z01, z11 = z[ic, ir], z[ic + 1, ir], z[ic, ir + 1], z[ic + 1, ir + 1]
+    z00, z10, z01, z11 = z(ic, ir), z(ic + 1, ir), z(ic, ir + 1), z(ic + 1, ir + 1)
     surface = jnp.where(w >= u, z00 + w * (z01 - z00) + u * (z11 - z01),
                         z00 + u * (z10 - z00) + w * (z11 - z10))
     sign = jnp.where(p[2] < surface, -1.0, 1.0)
 
     def contact(k):
         dk = d[k]
-        n = jnp.where(dk > 1e-6, sign * (p - q[k]) / jnp.maximum(dk, 1e-6), face_n[k])
+        face_n = jnp.cross(b[k] - a[k], c[k] - a[k])  # up (+z) for both halves
+        face_n = face_n / jnp.linalg.norm(face_n)
+        n = jnp.where(dk > 1e-6, sign * (p - q[k]) / jnp.maximum(dk, 1e-6), face_n)
         dist = sign * dk - r
         pos = q[k] + 0.5 * dist * n
         return dist, pos, n

@@ -53,6 +53,11 @@ for r in rows[:: max(1, len(rows) // 12)] + rows[-1:]:
 PY
 }
 
+# The reference physics as eval overrides (keys under [env]), and the lean physics of
+# stage2_u_lean.toml as training overrides.
+REFERENCE="robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5"
+LEAN="env.robot.terrain_contacts=nearest env.robot.shin_collision=false env.robot.ls_iterations=3"
+
 bench() {  # bench OUT_FILE CONFIG [overrides and options...]
   local out=$1 toml=$2; shift 2; mkdir -p "$(dirname "$out")"
   python3 -m mjx_stairs bench --config "$toml" "$@" --out "$out" 2>&1 | grep -v warp
@@ -113,15 +118,14 @@ for step in "$@"; do
       train stage2_u_lean_s1 experiments/stage2_u_lean.toml init_from="$s1" \
         train.experiment=stage2_u_lean_s1
       python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_lean_s1.npz --robots 1000 \
-        --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
+        --env $REFERENCE \
         --out "$OUT/stage2_u_lean_s1/eval_reference_physics" 2>&1 | grep -v warp ;;
     # the transfer matrix with the lean physics: each family's model trained as stage2_u_lean
     # (from the reference stage-1 policy; TRAIN_ARGS=train.total_iterations=290 for its budget),
     # then every model on every family at test levels 3-4, all evaluated in the reference physics
     straight-lean|l-shaped-lean|spiral-lean)
       fam=${step%-lean}; fam=${fam//-/_}
-      train "$fam" "experiments/$fam.toml" env.robot.terrain_contacts=nearest \
-        env.robot.shin_collision=false env.robot.ls_iterations=3 ;;
+      train "$fam" "experiments/$fam.toml" $LEAN ;;
     transfer-lean)
       models=/tmp/transfer_models.toml; echo "[models]" > $models
       echo "u_shaped = \"experiments/results/stage2_u_lean/policy.npz\"" >> $models
@@ -130,13 +134,13 @@ for step in "$@"; do
         echo "$fam = \"$p\"" >> $models
       done
       python3 -m mjx_stairs transfer-matrix --config $models --robots 1000 \
-        --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
+        --env $REFERENCE \
         --out "$OUT/transfer_lean" 2>&1 | grep -v warp ;;
     eval-lean)  # the lean-trained policy in the reference physics, and the reference policy in
       # the lean physics's collider (shins on, 5 line-search steps), 1000 robots per level
       p=/tmp/policies/stage2_u_lean.npz; [ -f "$p" ] || p=.carry/stage2_u_lean/policy.npz
       python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
-        --env robot.terrain_contacts=mjx robot.shin_collision=true robot.ls_iterations=5 \
+        --env $REFERENCE \
         --out "$OUT/stage2_u_lean/eval_reference_physics" 2>&1 | grep -v warp
       python3 -m mjx_stairs eval --checkpoint experiments/results/stage2_u/policy.npz \
         --robots 1000 --env robot.terrain_contacts=nearest \
