@@ -3,6 +3,7 @@
 (a) physics only: `decimation` MJX steps per policy step with random torques, no env logic;
 (b) the env: reset/step with observations, rewards, terminations, curriculum and auto-reset,
     random actions;
+(r) the trainer's rollout alone: (b) plus policy inference and the critic's values, no update;
 (c) full training: rollout + PPO update, the trainer's compiled chunk.
 Each is reported as env (policy) steps per second after warm-up, with compile times and the
 device's peak memory.
@@ -21,6 +22,7 @@ import jax.numpy as jnp
 from mujoco import mjx
 
 from mjx_stairs import robot as rb
+from mjx_stairs import train as tr
 from mjx_stairs.experiment import ExperimentConfig, make_env
 from mjx_stairs.train import build_trainer
 
@@ -104,6 +106,41 @@ def bench_train(config: ExperimentConfig, env, repeats: int) -> dict[str, float]
     return {"compile_s": compile_s, "steps_per_s": steps / times[len(times) // 2]}
 
 
+def bench_rollout(config: ExperimentConfig, env, repeats: int) -> dict[str, float]:
+    """(r) the trainer's rollout (policy inference, env steps, critic values), no update:
+    ``iterations_per_chunk`` rollouts with fixed params as one scan, like the chunk."""
+    trainer = build_trainer(config, env)
+    state = trainer.init(jax.random.PRNGKey(0))
+    kw = dict(config=config, env=env, layout=trainer.layout, mesh=trainer.mesh)
+
+    def one(st, _):
+        k, sub = jax.random.split(st.rng)
+        (env_state, ep_return, ep_length), t, _, _, boot = tr.rollout(st, sub, **kw)
+        st = st._replace(env_state=env_state, ep_return=ep_return, ep_length=ep_length, rng=k)
+        # keep the values and the recorded batch live, as the update would read them
+        return st, jnp.sum(t.value) + jnp.sum(t.final_value) + jnp.sum(boot) + jnp.sum(
+            t.log_prob) + jnp.sum(t.obs[..., 0]) + jnp.sum(t.critic_obs[..., 0])
+
+    fn = lambda s: jax.lax.scan(one, s, None, length=config.train.iterations_per_chunk)[0]
+    compile_s, run_s, _ = _time(fn, state, max(2, repeats // 2))
+    tc = config.train
+    steps = tc.num_envs * tc.unroll_length * tc.iterations_per_chunk
+    return {"compile_s": compile_s, "steps_per_s": steps / run_s}
+
+
+def _split(row: dict[str, Any], steps_per_iteration: int) -> dict[str, float]:
+    """Seconds of one training iteration spent in each layer, from the rates of one run."""
+    sec = {k: steps_per_iteration / row[k]["steps_per_s"]
+           for k in ("physics", "env", "rollout", "train") if k in row}
+    out = {}
+    layers = [("physics", None, "physics"), ("env_overhead", "physics", "env"),
+              ("policy_and_values", "env", "rollout"), ("update", "rollout", "train")]
+    for name, below, top in layers:
+        if top in sec and (below is None or below in sec):
+            out[name] = sec[top] - (sec[below] if below else 0.0)
+    return out
+
+
 def _memory() -> dict[str, float]:
     stats = jax.devices()[0].memory_stats() or {}
     return {k: stats[k] / 2**30 for k in ("peak_bytes_in_use", "bytes_limit") if k in stats}
@@ -114,9 +151,13 @@ def run_bench(
     robots: list[int],
     steps: int = 24,
     repeats: int = 5,
-    parts: tuple[str, ...] = ("physics", "env", "train"),
+    parts: tuple[str, ...] = ("physics", "env", "rollout", "train"),
 ) -> dict[str, Any]:
-    """Measure (a), (b), (c) for each robot count with one model and atlas."""
+    """Measure (a), (b), (r), (c) for each robot count with one model and atlas."""
+    unknown = set(parts) - {"physics", "env", "rollout", "train"}
+    if unknown:
+        raise ValueError(f"bench: unknown parts {sorted(unknown)} (expected physics, env, "
+                         "rollout, train)")
     env = make_env(config)
     out: dict[str, Any] = {
         "device": jax.devices()[0].device_kind,
@@ -134,6 +175,7 @@ def run_bench(
             "terrain_contacts": config.env.robot.terrain_contacts,
         },
         "network": {"conv_impl": config.network.conv_impl},
+        "rollout_values": config.train.rollout_values,
         "contacts": int(sum(r.size for r in env._contact_rows.values() if r is not None)),
         "results": [],
     }
@@ -144,10 +186,13 @@ def run_bench(
             row["physics"] = bench_physics(env, n, steps, repeats)
         if "env" in parts:
             row["env"] = bench_env(env, n, steps, repeats)
+        if "rollout" in parts:
+            row["rollout"] = bench_rollout(cfg, env, repeats)
         if "train" in parts:
             row["train"] = bench_train(cfg, env, max(2, repeats // 2))
         if "physics" in parts and "train" in parts:
             row["train_over_physics"] = row["train"]["steps_per_s"] / row["physics"]["steps_per_s"]
+        row["seconds_per_iteration"] = _split(row, n * cfg.train.unroll_length)
         row["memory_gib"] = _memory()
         out["results"].append(row)
         print(json.dumps(row), flush=True)

@@ -253,7 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--robots", type=int, nargs="+", default=[4096, 16384])
     b.add_argument("--steps", type=int, default=24)
     b.add_argument("--repeats", type=int, default=5)
-    b.add_argument("--parts", default="physics,env,train")
+    b.add_argument("--parts", default="physics,env,rollout,train")
     b.add_argument("--out", default=None, help="JSON path")
     b.set_defaults(fn=cmd_bench)
 

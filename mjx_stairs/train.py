@@ -96,6 +96,13 @@ class TrainConfig:
     keep_checkpoints: int = field(
         default=3, metadata={"help": "full checkpoints kept per run (0 = all)"}
     )
+    rollout_values: str = field(
+        default="batched",
+        metadata={"help": "'batched': the critic's values of the rollout (V(obs_t), V(final "
+                  "obs_t), the bootstrap) in one encoder pass after the rollout scan; "
+                  "'per_step': inside the scan, beside each action (same values, smaller "
+                  "batches)"},
+    )
     checkpoint_env: str = field(
         default="full",
         metadata={"help": "'full': the whole batched env state (bit-exact resume); 'packed': "
@@ -141,6 +148,7 @@ class Transition(NamedTuple):
     done: jax.Array  # [B]
     truncation: jax.Array  # [B]
     final_value: jax.Array  # [B] V(final obs of step t)
+    final_critic_obs: jax.Array | None  # [B, D] privileged final obs ('batched' values only)
 
 
 # ----------------------------------------------------------------------------- env glue
@@ -246,12 +254,21 @@ def init_state(rng: jax.Array, *, config, env, layout: ObsLayout) -> TrainState:
 
 
 def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layout: ObsLayout,
-                 mesh: Mesh):
-    """Act with the current policy, step every robot, record the transition."""
+                 mesh: Mesh, per_step_values: bool = True):
+    """Act with the current policy, step every robot, record the transition.
+
+    With ``per_step_values`` the critic's V(obs_t) and V(final obs_t) are computed here (one
+    fused actor-critic pass and one critic pass on B maps); without, the transition carries the
+    privileged final obs instead and ``rollout`` computes both values after the scan.
+    """
     env_state, ep_return, ep_length = carry
     obs = env_state.obs["state"]
     critic_obs = env_state.obs["privileged_state"]
-    mean, value = ppo.policy_mean_and_value(params, norm, obs, critic_obs, net_cfg, layout)
+    if per_step_values:
+        mean, value = ppo.policy_mean_and_value(params, norm, obs, critic_obs, net_cfg, layout)
+    else:
+        mean = ppo.policy_mean(params, norm, obs, net_cfg, layout)
+        value = None
     action = networks.sample(key, mean, params["log_std"])
     log_prob = networks.log_prob(mean, params["log_std"], action)
 
@@ -260,7 +277,11 @@ def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layou
     done = next_state.done.astype(jnp.float32)
     truncation = _truncation(next_state).astype(jnp.float32)
     final_obs = _final_obs(next_state)["privileged_state"]
-    final_value = ppo.critic_value(params, norm, final_obs, net_cfg, layout)
+    if per_step_values:
+        final_value = ppo.critic_value(params, norm, final_obs, net_cfg, layout)
+        final_obs = None
+    else:
+        final_value = None
 
     ep_return = ep_return + next_state.reward
     ep_length = ep_length + 1.0
@@ -275,26 +296,49 @@ def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layou
                                          dict(next_state.metrics))
     env_metrics["reward/total"] = jnp.mean(next_state.reward)
     tr = Transition(obs, critic_obs, action, log_prob, mean, value, next_state.reward.astype(
-        jnp.float32), done, truncation, final_value)
+        jnp.float32), done, truncation, final_value, final_obs)
     return (next_state, ep_return, ep_length), (tr, env_metrics, ep_stats)
+
+
+def rollout(state: TrainState, key: jax.Array, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """The rollout of one iteration with ``state.params``: T steps of every robot.
+
+    Returns ``((env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap)``:
+    ``tr`` is a Transition [T, B, ...] with ``value`` and ``final_value`` filled in and
+    ``final_critic_obs`` None; ``bootstrap`` [B] is V(obs_T).
+    """
+    nc: NetworkConfig = config.network
+    mode = config.train.rollout_values
+    step = functools.partial(
+        rollout_step, env=env, params=state.params, norm=state.normalizer, net_cfg=nc,
+        layout=layout, mesh=mesh, per_step_values=mode == "per_step",
+    )
+    carry, (tr, env_metrics, ep_stats) = jax.lax.scan(
+        step, (state.env_state, state.ep_return, state.ep_length),
+        jax.random.split(key, config.train.unroll_length),
+    )
+    tr = _constrain(tr, mesh, 1)
+    last_obs = carry[0].obs["privileged_state"]
+    if mode == "per_step":
+        bootstrap = ppo.critic_value(state.params, state.normalizer, last_obs, nc, layout)
+    else:
+        # one critic pass over [2T + 1, B] maps: V(obs_t), V(final obs_t), V(obs_T)
+        T = tr.critic_obs.shape[0]
+        stacked = jnp.concatenate([tr.critic_obs, tr.final_critic_obs, last_obs[None]], axis=0)
+        values = ppo.critic_value(state.params, state.normalizer,
+                                  _constrain(stacked, mesh, 1), nc, layout)
+        tr = tr._replace(value=values[:T], final_value=values[T:2 * T], final_critic_obs=None)
+        bootstrap = values[2 * T]
+    return carry, tr, env_metrics, ep_stats, bootstrap
 
 
 def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
     """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
     pc: PPOConfig = config.ppo
     nc: NetworkConfig = config.network
-    T = config.train.unroll_length
     rng, k_roll, k_update = jax.random.split(state.rng, 3)
-    step = functools.partial(
-        rollout_step, env=env, params=state.params, norm=state.normalizer, net_cfg=nc,
-        layout=layout, mesh=mesh,
-    )
-    (env_state, ep_return, ep_length), (tr, env_metrics, ep_stats) = jax.lax.scan(
-        step, (state.env_state, state.ep_return, state.ep_length), jax.random.split(k_roll, T)
-    )
-    tr = _constrain(tr, mesh, 1)
-    bootstrap = ppo.critic_value(
-        state.params, state.normalizer, env_state.obs["privileged_state"], nc, layout
+    (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
+        state, k_roll, config=config, env=env, layout=layout, mesh=mesh
     )
     termination = tr.done * (1.0 - tr.truncation)
     adv, target = ppo.compute_gae(
@@ -387,6 +431,9 @@ def _check(config, mesh: Mesh) -> None:
     if tc.checkpoint_env not in ("full", "packed"):
         raise ValueError(f"train.checkpoint_env must be 'full' or 'packed', not "
                          f"{tc.checkpoint_env!r}")
+    if tc.rollout_values not in ("batched", "per_step"):
+        raise ValueError(f"train.rollout_values must be 'batched' or 'per_step', not "
+                         f"{tc.rollout_values!r}")
     if pc.lr_schedule not in ("adaptive", "fixed"):
         raise ValueError(f"ppo.lr_schedule must be 'adaptive' or 'fixed', not {pc.lr_schedule!r}")
 
@@ -401,7 +448,8 @@ def _compiled_config(config) -> LearnerConfig:
         ppo=config.ppo,
         network=config.network,
         train=TrainConfig(num_envs=tc.num_envs, unroll_length=tc.unroll_length,
-                          iterations_per_chunk=tc.iterations_per_chunk),
+                          iterations_per_chunk=tc.iterations_per_chunk,
+                          rollout_values=tc.rollout_values),
     )
 
 

@@ -7,7 +7,7 @@
 # stage2, ablation, stage2-fast, stage2-final-goal, stage2-pair (stage 2 and its
 # ablation side by side on one GPU, same wall budget each), stage2-lean, eval-lean, stage1-lean,
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
-# transfer-lean, report. Each training step stops and
+# transfer-lean, bench4096-values, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -108,6 +108,12 @@ for step in "$@"; do
         --robots 4096 ;;
     bench4096-nearest) bench "$OUT/bench/abc_nearest.json" experiments/stage2_u.toml \
         env.robot.terrain_contacts=nearest --robots 4096 ;;
+    # the critic's rollout values after the scan ('batched', the default) against inside it
+    # ('per_step'), with the rollout alone (r) beside (a), (b), (c) to split an iteration
+    bench4096-values)
+      bench "$OUT/bench/abcr_lean.json" experiments/stage2_u_lean.toml --robots 4096
+      bench "$OUT/bench/rc_lean_per_step.json" experiments/stage2_u_lean.toml \
+        train.rollout_values=per_step --robots 4096 --parts rollout,train ;;
     bench16384-lean) bench "$OUT/bench/abc_lean_16384.json" experiments/stage2_u_lean.toml \
         --robots 16384 ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;

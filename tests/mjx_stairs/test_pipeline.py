@@ -122,6 +122,12 @@ def test_bench_measures_physics_and_env():
     out = bench.run_bench(config, [4], steps=2, repeats=1, parts=("physics", "env"))
     row = out["results"][0]
     assert row["physics"]["steps_per_s"] > 0 and row["env"]["steps_per_s"] > 0
+    split = row["seconds_per_iteration"]  # T x B steps at each rate, layered
+    assert set(split) == {"physics", "env_overhead"}
+    assert split["physics"] == pytest.approx(4 * config.train.unroll_length
+                                             / row["physics"]["steps_per_s"])
+    with pytest.raises(ValueError, match="unknown parts"):
+        bench.run_bench(config, [4], parts=("physics", "rolout"))
     assert out["contacts"] == 64  # 16 spheres x 4 heightfield contacts
     assert out["solver"]["terrain_contacts"] == "mjx"
 

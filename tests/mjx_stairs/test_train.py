@@ -80,6 +80,35 @@ def test_bad_sizes_are_clear_errors():
         train.make_train(cfg, PointReach())
 
 
+def test_batched_rollout_values_equal_per_step_values():
+    """The critic's values computed after the rollout scan (one batched pass) are the values
+    the per-step path computes beside each action, final-obs values of timeouts included."""
+    env = PointReach(map_shape=(5, 5), episode_length=5)  # timeouts inside an 8-step rollout
+    cfg = LearnerConfig(network=SMALL_NET,
+                        train=TrainConfig(num_envs=16, unroll_length=8, iterations_per_chunk=1))
+    trainer = train.build_trainer(cfg, env)
+    state = trainer.init(jax.random.PRNGKey(5))
+    key = jax.random.PRNGKey(6)
+    out = {}
+    for mode in ("per_step", "batched"):
+        c = replace(cfg, train=replace(cfg.train, rollout_values=mode))
+        fn = jax.jit(lambda s, k, c=c: train.rollout(s, k, config=c, env=env,
+                                                       layout=trainer.layout, mesh=trainer.mesh))
+        out[mode] = fn(state, key)
+    (_, a, _, _, boot_a), (_, b, _, _, boot_b) = out["per_step"], out["batched"]
+    assert b.final_critic_obs is None and a.final_critic_obs is None
+    assert float(np.sum(a.truncation)) >= 16  # every robot timed out once
+    np.testing.assert_array_equal(np.asarray(a.action), np.asarray(b.action))
+    for x, y in ((a.value, b.value), (a.final_value, b.final_value), (boot_a, boot_b)):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-5)
+    # the final-obs values are not the next step's values where an episode ended
+    ended = np.asarray(a.done[:-1]) > 0
+    gap = np.asarray(a.final_value[:-1])[ended] - np.asarray(a.value[1:])[ended]
+    assert np.abs(gap).max() > 1e-3
+    with pytest.raises(ValueError, match="train.rollout_values must be"):
+        train.make_train(replace(cfg, train=replace(cfg.train, rollout_values="x")), env)
+
+
 # ----------------------------------------------------------------------------- resume
 
 
