@@ -337,9 +337,10 @@ def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, 
     pc: PPOConfig = config.ppo
     nc: NetworkConfig = config.network
     rng, k_roll, k_update = jax.random.split(state.rng, 3)
-    (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
-        state, k_roll, config=config, env=env, layout=layout, mesh=mesh
-    )
+    with jax.named_scope("rollout"):  # scopes name the pieces in a profiler trace
+        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
+            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
+        )
     termination = tr.done * (1.0 - tr.truncation)
     adv, target = ppo.compute_gae(
         tr.truncation, termination, tr.reward, tr.value, bootstrap, pc.gae_lambda, pc.discount,
@@ -352,10 +353,11 @@ def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, 
     # [T, B] -> [B, T] so the flattened sample axis stays contiguous per device.
     batch = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), batch)
     batch = _constrain(batch, mesh, 0)
-    params, opt_state, upd_metrics = ppo.update(
-        state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
-        constrain=lambda b: _constrain(b, mesh, 1),
-    )
+    with jax.named_scope("ppo_update"):
+        params, opt_state, upd_metrics = ppo.update(
+            state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
+            constrain=lambda b: _constrain(b, mesh, 1),
+        )
     norm = state.normalizer
     if nc.normalize_obs:
         norm = {
