@@ -8,7 +8,8 @@ Compiles the trainer's chunk, runs it once to warm up, then runs one chunk under
 trainer's named scopes in each event's op name (``rollout``, ``ppo_update``, the rest, and
 whether inside the CNN ``encoder``), (b) by the first components of that op name and (c) by HLO
 op (the 40 largest of each), against the chunk's wall time. Kernels can overlap on several
-streams, so the sums are busy time, not wall time.
+streams, so the sums are busy time, not wall time. cuBLAS kernels inside a CUDA graph carry no
+instruction name; run with XLA_FLAGS=--xla_gpu_enable_command_buffer= to attribute them too.
 """
 
 from __future__ import annotations
@@ -95,7 +96,8 @@ def main() -> None:
         if e.get("ph") != "X" or e.get("pid") not in device_pids or not hlo_op:
             continue
         dur = float(e.get("dur", 0.0)) / 1e3  # us -> ms
-        op_name = op_names.get(hlo_op, "")
+        # inside a CUDA graph (command buffer) the event's name is the fused instruction's
+        op_name = op_names.get(hlo_op) or op_names.get(e.get("name", ""), "")
         scope = next((s for s in ("ppo_update", "rollout") if s in op_name), "other")
         by_scope[scope] += dur
         if "encoder" in op_name:
@@ -107,7 +109,8 @@ def main() -> None:
     tc = config.train
     out = {
         "device": jax.devices()[0].device_kind, "jax": jax.__version__, "config": args.config,
-        "overrides": args.overrides, "robots": tc.num_envs,
+        "overrides": args.overrides, "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "robots": tc.num_envs,
         "iterations": tc.iterations_per_chunk,
         "env_steps_per_s": tc.num_envs * tc.unroll_length * tc.iterations_per_chunk
         / (wall_ms / 1e3),
