@@ -3,6 +3,7 @@ evaluation, the EXP1 report, the transfer matrix and the bench on what it produc
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -107,6 +108,19 @@ def test_transfer_matrix_and_transferability(trained, tmp_path):
         bad = tmp_path / "bad.toml"
         bad.write_text('[models]\nzigzag = "x.npz"\n')
         transfer.load_models(bad)
+
+
+def test_published_transfer_models_load():
+    """The committed matrix's models file names policies that exist and load, one per family,
+    all with the same observation layout and the training physics their configs recorded."""
+    models = transfer.load_models("experiments/results/transfer_lean/models.toml")
+    assert set(models) == {"u_shaped", "straight", "l_shaped", "spiral"}
+    layouts = {str(load_policy(p).layout) for p in models.values()}
+    assert len(layouts) == 1
+    for fam in ("straight", "l_shaped", "spiral"):
+        cfg = json.loads((Path(models[fam]).parent / "config.json").read_text())
+        assert cfg["terrain"]["families"] == [fam]
+        assert cfg["env"]["robot"]["terrain_contacts"] == "nearest"
 
 
 def test_bench_measures_physics_and_env():
