@@ -8,7 +8,7 @@
 # ablation side by side on one GPU, same wall budget each), stage2-lean, eval-lean, stage1-lean,
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
-# trace-chunk, trace-chunk-nocb, report. Each training step stops and
+# trace-chunk, trace-chunk-nocb, bench4096-graphs, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -132,6 +132,10 @@ for step in "$@"; do
       XLA_FLAGS=--xla_gpu_enable_command_buffer= python3 experiments/gpu/trace_chunk.py \
         --config experiments/stage2_u_lean.toml --out "$OUT/bench/trace_chunk_nocb.json" 2>&1 \
         | grep -v warp ;;
+    bench4096-graphs)  # CUDA graphs for while loops and conditionals too (XLA's default
+      # command buffers take fusions and library calls only)
+      XLA_FLAGS=--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL \
+        bench "$OUT/bench/abcr_lean_graphs.json" experiments/stage2_u_lean.toml --robots 4096 ;;
     bench16384-lean) bench "$OUT/bench/abc_lean_16384.json" experiments/stage2_u_lean.toml \
         --robots 16384 ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;
