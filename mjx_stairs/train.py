@@ -143,11 +143,11 @@ class Transition(NamedTuple):
     action: jax.Array  # [B, A]
     log_prob: jax.Array  # [B]
     mean: jax.Array  # [B, A]
-    value: jax.Array  # [B] V(obs_t)
+    value: jax.Array | None  # [B] V(obs_t) (None inside the scan with 'batched' values)
     reward: jax.Array  # [B]
     done: jax.Array  # [B]
     truncation: jax.Array  # [B]
-    final_value: jax.Array  # [B] V(final obs of step t)
+    final_value: jax.Array | None  # [B] V(final obs of step t) (likewise)
     final_critic_obs: jax.Array | None  # [B, D] privileged final obs ('batched' values only)
 
 
