@@ -22,9 +22,8 @@ import jax.numpy as jnp
 from mujoco import mjx
 
 from mjx_stairs import robot as rb
-from mjx_stairs import train as tr
 from mjx_stairs.experiment import ExperimentConfig, make_env
-from mjx_stairs.train import build_trainer
+from mjx_stairs.train import build_trainer, rollout
 
 
 def _time(fn, arg, repeats: int) -> tuple[float, float, Any]:
@@ -115,7 +114,7 @@ def bench_rollout(config: ExperimentConfig, env, repeats: int) -> dict[str, floa
 
     def one(st, _):
         k, sub = jax.random.split(st.rng)
-        (env_state, ep_return, ep_length), t, _, _, boot = tr.rollout(st, sub, **kw)
+        (env_state, ep_return, ep_length), t, _, _, boot = rollout(st, sub, **kw)
         st = st._replace(env_state=env_state, ep_return=ep_return, ep_length=ep_length, rng=k)
         # keep the values and the recorded batch live, as the update would read them
         return st, jnp.sum(t.value) + jnp.sum(t.final_value) + jnp.sum(boot) + jnp.sum(

@@ -227,6 +227,16 @@ def minibatch_step(
     return (params, opt_state), aux
 
 
+def shuffle_minibatches(data: Batch, key: jax.Array, m: int) -> Batch:
+    """A random permutation of the flattened batch [N, ...], split into m minibatches
+    [m, N / m, ...]."""
+    n = data.advantage.shape[0]
+    perm = jax.random.permutation(key, n)
+    return jax.tree_util.tree_map(
+        lambda x: jnp.take(x, perm, axis=0).reshape(m, n // m, *x.shape[1:]), data
+    )
+
+
 def sgd_step(
     carry: tuple[Params, optim.AdamState, jax.Array],
     _: Any,
@@ -242,13 +252,7 @@ def sgd_step(
     """One epoch: shuffle the flattened batch [N, ...], split into M minibatches, scan them."""
     params, opt_state, rng = carry
     rng, key = jax.random.split(rng)
-    n = data.advantage.shape[0]
-    m = cfg.num_minibatches
-    perm = jax.random.permutation(key, n)
-    shuffled = jax.tree_util.tree_map(
-        lambda x: jnp.take(x, perm, axis=0).reshape(m, n // m, *x.shape[1:]), data
-    )
-    shuffled = constrain(shuffled)
+    shuffled = constrain(shuffle_minibatches(data, key, cfg.num_minibatches))
     step = functools.partial(
         minibatch_step, norm=norm, old_log_std=old_log_std, cfg=cfg, net_cfg=net_cfg,
         layout=layout,

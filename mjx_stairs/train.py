@@ -332,15 +332,9 @@ def rollout(state: TrainState, key: jax.Array, *, config, env, layout: ObsLayout
     return carry, tr, env_metrics, ep_stats, bootstrap
 
 
-def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
-    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
-    pc: PPOConfig = config.ppo
-    nc: NetworkConfig = config.network
-    rng, k_roll, k_update = jax.random.split(state.rng, 3)
-    with jax.named_scope("rollout"):  # scopes name the pieces in a profiler trace
-        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
-            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
-        )
+def rollout_batch(tr: Transition, bootstrap: jax.Array, pc: PPOConfig,
+                  mesh: Mesh) -> tuple[ppo.Batch, jax.Array]:
+    """GAE over a rollout [T, B] -> (the PPO Batch [B, T, ...], termination [T, B])."""
     termination = tr.done * (1.0 - tr.truncation)
     adv, target = ppo.compute_gae(
         tr.truncation, termination, tr.reward, tr.value, bootstrap, pc.gae_lambda, pc.discount,
@@ -352,22 +346,40 @@ def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, 
     )
     # [T, B] -> [B, T] so the flattened sample axis stays contiguous per device.
     batch = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), batch)
-    batch = _constrain(batch, mesh, 0)
+    return _constrain(batch, mesh, 0), termination
+
+
+def updated_normalizer(norm: dict[str, normalizer.RunningStats], tr: Transition,
+                       nc: NetworkConfig) -> dict[str, normalizer.RunningStats]:
+    """The observation statistics merged with this rollout's observations (when enabled)."""
+    if not nc.normalize_obs:
+        return norm
+    return {
+        "state": normalizer.update_stats(norm["state"], tr.obs),
+        "privileged_state": normalizer.update_stats(norm["privileged_state"], tr.critic_obs),
+    }
+
+
+def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
+    pc: PPOConfig = config.ppo
+    nc: NetworkConfig = config.network
+    rng, k_roll, k_update = jax.random.split(state.rng, 3)
+    with jax.named_scope("rollout"):  # scopes name the pieces in a profiler trace
+        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
+            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
+        )
+    batch, termination = rollout_batch(tr, bootstrap, pc, mesh)
     with jax.named_scope("ppo_update"):
         params, opt_state, upd_metrics = ppo.update(
             state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
             constrain=lambda b: _constrain(b, mesh, 1),
         )
-    norm = state.normalizer
-    if nc.normalize_obs:
-        norm = {
-            "state": normalizer.update_stats(norm["state"], tr.obs),
-            "privileged_state": normalizer.update_stats(norm["privileged_state"], tr.critic_obs),
-        }
+    norm = updated_normalizer(state.normalizer, tr, nc)
     metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
     metrics.update(upd_metrics)
     metrics["value/mean"] = jnp.mean(tr.value)
-    metrics["value/target_mean"] = jnp.mean(target)
+    metrics["value/target_mean"] = jnp.mean(batch.target)
     metrics["episode/terminations"] = jnp.sum(termination)
     metrics["episode/truncations"] = jnp.sum(tr.truncation)
     metrics.update({f"_ep/{k}": jnp.sum(v) for k, v in ep_stats.items()})

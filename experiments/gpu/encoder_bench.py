@@ -26,7 +26,8 @@ from mjx_stairs.networks import NetworkConfig, ObsLayout
 LAYOUT = ObsLayout(49, (21, 21))  # env.N_VEC, the 21 x 21 height scan
 
 
-def _time_ms(fn, args, repeats: int) -> float:
+def time_ms(fn, args, repeats: int) -> float:
+    """Median milliseconds of fn(*args) over ``repeats`` calls after compile and one warm-up."""
     jax.block_until_ready(fn(*args))  # compile + warm-up
     jax.block_until_ready(fn(*args))
     times = []
@@ -61,8 +62,8 @@ def main() -> None:
                                   ("row_bf16", "row_bf16", None)):
         with jax.default_matmul_precision(precision):  # None: the default
             g, f = make(impl)  # jit inside the context: precision is fixed at trace time
-            ms = _time_ms(g, (params, obs), args.repeats)
-            fwd = _time_ms(f, (params, obs), args.repeats)
+            ms = time_ms(g, (params, obs), args.repeats)
+            fwd = time_ms(f, (params, obs), args.repeats)
             grads[name] = g(params, obs)
         rows[name] = {"conv_impl": impl, "matmul_precision": precision or "default",
                       "fwd_bwd_ms": round(ms, 3), "fwd_ms": round(fwd, 3)}

@@ -18,24 +18,11 @@ import argparse
 import dataclasses
 import functools
 import json
-import statistics
-import time
 
 import jax
-import jax.numpy as jnp
+from encoder_bench import time_ms  # this folder, on sys.path when run as a script
 
-from mjx_stairs import atomic, experiment, normalizer, ppo, train
-
-
-def _time_ms(fn, args, repeats: int) -> float:
-    jax.block_until_ready(fn(*args))
-    jax.block_until_ready(fn(*args))
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append((time.perf_counter() - t) * 1e3)
-    return statistics.median(times)
+from mjx_stairs import atomic, experiment, ppo, train
 
 
 def main() -> None:
@@ -61,42 +48,26 @@ def main() -> None:
     ms = out["ms"]
 
     roll = jax.jit(lambda s, k: train.rollout(s, k, **kw))
-    ms["rollout"] = _time_ms(roll, (state, jax.random.PRNGKey(1)), args.repeats)
+    ms["rollout"] = time_ms(roll, (state, jax.random.PRNGKey(1)), args.repeats)
     _, tr, _, _, bootstrap = roll(state, jax.random.PRNGKey(1))
 
     def glue(tr, bootstrap, norm):
-        termination = tr.done * (1.0 - tr.truncation)
-        adv, target = ppo.compute_gae(tr.truncation, termination, tr.reward, tr.value, bootstrap,
-                                      pc.gae_lambda, pc.discount, tr.final_value)
-        batch = ppo.Batch(obs=tr.obs, critic_obs=tr.critic_obs, action=tr.action,
-                          log_prob=tr.log_prob, mean=tr.mean, value=tr.value, advantage=adv,
-                          target=target)
-        batch = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), batch)
-        norm = {"state": normalizer.update_stats(norm["state"], tr.obs),
-                "privileged_state": normalizer.update_stats(norm["privileged_state"],
-                                                            tr.critic_obs)}
-        return batch, norm
+        return train.rollout_batch(tr, bootstrap, pc, mesh)[0], train.updated_normalizer(
+            norm, tr, nc)
 
     glue_j = jax.jit(glue)
-    ms["glue_gae_swap_normaliser"] = _time_ms(glue_j, (tr, bootstrap, state.normalizer),
-                                              args.repeats)
+    ms["glue_gae_swap_normaliser"] = time_ms(glue_j, (tr, bootstrap, state.normalizer),
+                                             args.repeats)
     batch, _ = glue_j(tr, bootstrap, state.normalizer)
     n = batch.advantage.shape[0] * batch.advantage.shape[1]
     flat = jax.tree_util.tree_map(lambda x: x.reshape(n, *x.shape[2:]), batch)
-
-    def shuffle(flat, key):
-        perm = jax.random.permutation(key, n)
-        m = pc.num_minibatches
-        return jax.tree_util.tree_map(
-            lambda x: jnp.take(x, perm, axis=0).reshape(m, n // m, *x.shape[1:]), flat)
-
-    ms["shuffle_one_epoch"] = _time_ms(jax.jit(shuffle), (flat, jax.random.PRNGKey(2)),
-                                       args.repeats)
+    shuffle = jax.jit(functools.partial(ppo.shuffle_minibatches, m=pc.num_minibatches))
+    ms["shuffle_one_epoch"] = time_ms(shuffle, (flat, jax.random.PRNGKey(2)), args.repeats)
     mb = jax.tree_util.tree_map(lambda x: x[: n // pc.num_minibatches], flat)
     step = jax.jit(functools.partial(
         ppo.minibatch_step, norm=state.normalizer, old_log_std=state.params["log_std"], cfg=pc,
         net_cfg=nc, layout=layout))
-    ms["minibatch_step"] = _time_ms(lambda c, b: step(c, b)[0], ((state.params, state.opt_state),
+    ms["minibatch_step"] = time_ms(lambda c, b: step(c, b)[0], ((state.params, state.opt_state),
                                                                  mb), args.repeats)
 
     def update(params, opt_state, norm, batch, key, cfg):
@@ -106,11 +77,11 @@ def main() -> None:
                       ("update_1_epoch_1_minibatch",
                        dataclasses.replace(pc, num_epochs=1, num_minibatches=1))):
         fn = jax.jit(functools.partial(update, cfg=cfg))
-        ms[name] = _time_ms(fn, (state.params, state.opt_state, state.normalizer, batch,
+        ms[name] = time_ms(fn, (state.params, state.opt_state, state.normalizer, batch,
                                  jax.random.PRNGKey(3)), args.repeats)
 
     it = jax.jit(lambda s: train.training_iteration(s, None, **kw)[0])
-    ms["training_iteration"] = _time_ms(it, (state,), args.repeats)
+    ms["training_iteration"] = time_ms(it, (state,), args.repeats)
     ms["sum_of_pieces"] = ms["rollout"] + ms["glue_gae_swap_normaliser"] + ms["update"]
     print(json.dumps(out, indent=1), flush=True)
     atomic.write_text(args.out, json.dumps(out, indent=2))
