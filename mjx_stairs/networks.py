@@ -37,6 +37,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_stairs import fused_encoder
+
 Params = dict[str, Any]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -263,6 +265,7 @@ CONV_IMPLS = {
     "xla": _conv3x3,
     "row": _conv3x3_row,
     "row_bf16": functools.partial(_conv3x3_row, operand_dtype=jnp.bfloat16),
+    "fused": None,  # the whole conv stack in one custom-VJP function: fused_encoder.conv_stack
 }
 
 
@@ -329,7 +332,9 @@ def encode(
     with jax.named_scope("encoder"):  # names the CNN's kernels in a profiler trace
         x = obs[..., layout.n_vec :].reshape(-1, *layout.map_shape, 1)
         n_conv = len(enc["conv"])
-        for i, p in enumerate(enc["conv"]):
+        if conv is None:
+            x = fused_encoder.conv_stack(x[..., 0], enc["conv"])
+        for i, p in enumerate(enc["conv"] if conv is not None else ()):
             x = jax.nn.elu(conv(x, p))
             if i < n_conv - 1:
                 x = _maxpool2(x)

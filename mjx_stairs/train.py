@@ -253,6 +253,15 @@ def init_state(rng: jax.Array, *, config, env, layout: ObsLayout) -> TrainState:
     )
 
 
+def _robot_sums(per_robot: dict[str, jax.Array]) -> dict[str, jax.Array]:
+    """{name: [B]} -> {name: sum over the robots}, as one reduction of the stacked [n, B]:
+    one kernel per env step instead of one per metric (~40 tiny kernels, ~9 ms per iteration
+    of 24 steps at 4096 robots on an H100)."""
+    names = sorted(per_robot)
+    stacked = jnp.stack([per_robot[k].astype(jnp.float32) for k in names])
+    return dict(zip(names, jnp.sum(stacked, axis=1), strict=True))
+
+
 def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layout: ObsLayout,
                  mesh: Mesh, per_step_values: bool = True):
     """Act with the current policy, step every robot, record the transition.
@@ -285,16 +294,16 @@ def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layou
 
     ep_return = ep_return + next_state.reward
     ep_length = ep_length + 1.0
-    ep_stats = {
-        "count": jnp.sum(done),
-        "return_sum": jnp.sum(done * ep_return),
-        "length_sum": jnp.sum(done * ep_length),
-    }
+    per_robot = {f"_ep/{k}": v for k, v in (
+        ("count", done), ("return_sum", done * ep_return), ("length_sum", done * ep_length))}
+    per_robot.update(next_state.metrics)
+    per_robot["reward/total"] = next_state.reward
     ep_return = ep_return * (1.0 - done)
     ep_length = ep_length * (1.0 - done)
-    env_metrics = jax.tree_util.tree_map(lambda x: jnp.mean(x.astype(jnp.float32)),
-                                         dict(next_state.metrics))
-    env_metrics["reward/total"] = jnp.mean(next_state.reward)
+    sums = _robot_sums(per_robot)
+    n = done.shape[0]
+    ep_stats = {k[4:]: v for k, v in sums.items() if k.startswith("_ep/")}
+    env_metrics = {k: v / n for k, v in sums.items() if not k.startswith("_ep/")}
     tr = Transition(obs, critic_obs, action, log_prob, mean, value, next_state.reward.astype(
         jnp.float32), done, truncation, final_value, final_obs)
     return (next_state, ep_return, ep_length), (tr, env_metrics, ep_stats)

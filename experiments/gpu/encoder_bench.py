@@ -7,7 +7,8 @@ of a scalar loss of ``networks.encode`` wrt the params (float32, the stair layou
 + a 21x21 map, default NetworkConfig) and reports the median ms of ``--repeats`` calls after
 warm-up. 'row' is also timed under jax.default_matmul_precision("float32"): if that is slower
 than the default, the default matmuls ran in TF32. 'row_bf16' (bfloat16 operands, float32
-accumulation) is timed beside them; its gradient difference says what the rounding costs.
+accumulation) is timed beside them; its gradient difference says what the rounding costs. 'fused' (the conv
+stack with its written-out backward pass) is timed in the default precision and in float32.
 """
 
 from __future__ import annotations
@@ -59,7 +60,9 @@ def main() -> None:
     for name, impl, precision in (("xla", "xla", None), ("row", "row", None),
                                   ("xla_fp32", "xla", "float32"),
                                   ("row_fp32", "row", "float32"),
-                                  ("row_bf16", "row_bf16", None)):
+                                  ("row_bf16", "row_bf16", None),
+                                  ("fused", "fused", None),
+                                  ("fused_fp32", "fused", "float32")):
         with jax.default_matmul_precision(precision):  # None: the default
             g, f = make(impl)  # jit inside the context: precision is fixed at trace time
             ms = time_ms(g, (params, obs), args.repeats)

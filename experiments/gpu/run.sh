@@ -8,7 +8,8 @@
 # ablation side by side on one GPU, same wall budget each), stage2-lean, eval-lean, stage1-lean,
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
-# trace-chunk, trace-chunk-nocb, bench4096-graphs, report. Each training step stops and
+# trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
+# bench4096-fused-abcr, stage2-lean-fused, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -136,6 +137,22 @@ for step in "$@"; do
       # command buffers take fusions and library calls only)
       XLA_FLAGS=--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL \
         bench "$OUT/bench/abcr_lean_graphs.json" experiments/stage2_u_lean.toml --robots 4096 ;;
+    # conv_impl=fused (mjx_stairs/fused_encoder.py): the encoder alone against the others, then
+    # (a), (b), (r), (c) with it
+    bench4096-fused) mkdir -p "$OUT/bench"; python3 experiments/gpu/encoder_bench.py \
+        --batch 49152 --out "$OUT/bench/encoder_fused.json" 2>&1 | grep -v warp
+      bench "$OUT/bench/abcr_lean_fused.json" experiments/stage2_u_lean.toml \
+        network.conv_impl=fused --robots 4096 ;;
+    bench4096-fused-abcr) bench "$OUT/bench/abcr_lean_fused_sums.json" \
+        experiments/stage2_u_lean.toml network.conv_impl=fused --robots 4096 ;;
+    # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
+    # for the budget of the other lean runs), then evaluated in the reference physics
+    stage2-lean-fused)
+      train stage2_u_lean_fused experiments/stage2_u_lean.toml network.conv_impl=fused \
+        train.experiment=stage2_u_lean_fused
+      python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_lean_fused.npz \
+        --robots 1000 --env $REFERENCE \
+        --out "$OUT/stage2_u_lean_fused/eval_reference_physics" 2>&1 | grep -v warp ;;
     bench16384-lean) bench "$OUT/bench/abc_lean_16384.json" experiments/stage2_u_lean.toml \
         --robots 16384 ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;

@@ -155,10 +155,14 @@ def test_fused_actor_critic_equals_separate_passes():
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
 
 
-@pytest.mark.parametrize("n_vec,map_shape", [(49, (21, 21)), (3, (7, 9))])
-def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape):
-    """conv_impl='row' (row-Toeplitz matmuls) is the same function as lax.conv: features and
-    their gradients wrt every encoder param agree."""
+@pytest.mark.parametrize("impl", ["row", "fused"])
+@pytest.mark.parametrize("n_vec,map_shape,flat", [(49, (21, 21), False), (3, (7, 9), False),
+                                                  (49, (21, 21), True), (2, (10, 8), False)])
+def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape, flat, impl):
+    """conv_impl='row' (row-Toeplitz matmuls) and 'fused' (the conv stack with its written-out
+    backward pass) are the same function as lax.conv: features and their gradients wrt every
+    encoder param agree. Flat maps (one bump) make the max-pool windows tie: the gradient is
+    split between the tied positions as jax's max gradient does."""
     layout = ObsLayout(n_vec, map_shape)
     cfg = NetworkConfig(conv_channels=(4, 6, 8), latent_size=16, actor_hidden=(8,),
                         critic_hidden=(8,))
@@ -168,6 +172,8 @@ def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape):
     p["encoder"]["conv"] = [{"w": c["w"], "b": 0.3 * jax.random.normal(kk, c["b"].shape)}
                             for c, kk in zip(p["encoder"]["conv"], k[:3], strict=True)]
     obs = jax.random.normal(k[3], (5, layout.obs_size))
+    if flat:
+        obs = obs.at[:, n_vec:].set(0.3).at[0, n_vec + 30].set(1.0)
     weights = jnp.cos(jnp.arange(cfg.latent_size + n_vec, dtype=jnp.float32))
 
     def loss(params, impl):
@@ -175,7 +181,7 @@ def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape):
         return jnp.sum(jnp.sin(feat) * weights), feat
 
     grad = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
-    (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, "row")
+    (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, impl)
     np.testing.assert_allclose(fb, fa, rtol=1e-5, atol=1e-5)
     assert float(jnp.abs(fa[:, :16]).max()) > 0.0
     for a, b in zip(jax.tree_util.tree_leaves(ga["encoder"]),

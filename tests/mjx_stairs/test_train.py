@@ -107,6 +107,13 @@ def test_batched_rollout_values_equal_per_step_values():
     assert np.abs(gap).max() > 1e-3
     with pytest.raises(ValueError, match="train.rollout_values must be"):
         train.make_train(replace(cfg, train=replace(cfg.train, rollout_values="x")), env)
+    # the per-step metrics (one stacked reduction) are the robots' means, the episode stats sums
+    _, _, metrics, ep_stats, _ = out["batched"]
+    reward, done = np.asarray(b.reward), np.asarray(b.done)
+    np.testing.assert_allclose(np.asarray(metrics["reward/total"]), reward.mean(axis=1),
+                               rtol=1e-6)
+    np.testing.assert_array_equal(np.asarray(ep_stats["count"]), done.sum(axis=1))
+    assert float(np.sum(ep_stats["count"])) >= 16 and set(metrics) > {"reward/total"}
 
 
 # ----------------------------------------------------------------------------- resume

@@ -1,0 +1,187 @@
+"""The encoder's conv stack as one function with a hand-written backward pass (conv_impl "fused").
+
+Same function as the per-layer paths in ``networks`` (3x3 SAME conv -> ELU -> 2x2 max-pool for
+every layer but the last, conv -> ELU for the last), computed with fewer passes over memory:
+
+- Each conv is one row-Toeplitz matmul (as ``networks._conv3x3_row``): the three neighbouring
+  input rows side by side, [N, rows, 3 W Cin], times a [3 W Cin, cols] matrix built from the
+  kernel. A pooled layer computes only the rows and columns its floor pooling keeps, and orders
+  the output columns by column parity, (parity, col // 2, cout), so that the 2x2 max is a max
+  over four contiguous blocks of the [N, H/2, 2, 2, W/2 Cout] result.
+- Pooling comes before the ELU and the bias: both are monotone in each position and the bias
+  is the same within a window, so max(ELU(z + b)) = ELU(max(z) + b), with a quarter of the
+  ELU work.
+- The backward pass is written out: per layer one elementwise pass (ELU derivative, the pooling
+  gradient routed to the window's maxima, split equally between ties as jax's max gradient
+  does), one matmul for the weights (the bias gradient rides in it as a column of ones on the
+  input rows) and one for the input. Forward saves the row stacks, the ELU outputs and a byte
+  per pooled value saying which of its four positions held the max.
+
+Params are those of ``networks`` (the kernels [3, 3, Cin, Cout] and biases [Cout]); the
+Toeplitz matrices are built from them outside the custom VJP, so their gradient folds back into
+the kernels by ordinary autodiff.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+_HIGHEST = jax.lax.Precision.HIGHEST
+
+
+def _shifts(w_in: int, cols: np.ndarray) -> np.ndarray:
+    """0/1 S [3 (kx), w_in (input col), len(cols)]: S[kx, i, j] = 1 where input column
+    i = cols[j] + kx - 1 lies inside the row (outside it is SAME padding's zeros)."""
+    s = np.zeros((3, w_in, len(cols)), np.float32)
+    for j, o in enumerate(cols):
+        for kx in range(3):
+            i = o + kx - 1
+            if 0 <= i < w_in:
+                s[kx, i, j] = 1.0
+    return s
+
+
+def _out_cols(w_in: int, pooled: bool) -> np.ndarray:
+    """Output columns a layer computes, in matrix order: parity-major when pooled (the columns
+    2j, then 2j + 1, for j < w_in // 2; an odd last column is dropped), all of them otherwise."""
+    if not pooled:
+        return np.arange(w_in)
+    half = w_in // 2
+    return np.concatenate([2 * np.arange(half), 2 * np.arange(half) + 1])
+
+
+def toeplitz(kernel: jax.Array, w_in: int, pooled: bool) -> jax.Array:
+    """Kernel [3, 3, Cin, Cout] -> T [3 w_in Cin, n_cols Cout], rows (ky, col, cin), columns
+    (output col in ``_out_cols`` order, cout). HIGHEST precision: S only selects weights."""
+    c_in, c_out = kernel.shape[2], kernel.shape[3]
+    cols = _out_cols(w_in, pooled)
+    t = jnp.einsum("xio,yxcd->yicod", _shifts(w_in, cols), kernel, precision=_HIGHEST)
+    return t.reshape(3 * w_in * c_in, len(cols) * c_out)
+
+
+def _row_stack(x: jax.Array, n_rows: int) -> jax.Array:
+    """[N, H, R] -> [N, n_rows, 3 R + 1]: for output row o, input rows o-1, o, o+1 (zeros past
+    the edges) side by side, then a 1 (the bias column of the weight gradient)."""
+    n, h, r = x.shape
+    xp = jnp.pad(x, ((0, 0), (1, max(n_rows + 1 - h, 0)), (0, 0)))
+    ones = jnp.ones((n, n_rows, 1), x.dtype)
+    return jnp.concatenate([xp[:, :n_rows], xp[:, 1:n_rows + 1], xp[:, 2:n_rows + 2], ones],
+                           axis=-1)
+
+
+def _row_unstack(g: jax.Array, h: int) -> jax.Array:
+    """Adjoint of ``_row_stack`` without its ones column: [N, n_rows, 3 R] -> [N, h, R]."""
+    n, n_rows, _ = g.shape
+    r = g.shape[-1] // 3
+    gp = jnp.zeros((n, max(n_rows + 2, h + 2), r), g.dtype)
+    gp = gp.at[:, 0:n_rows].add(g[..., :r])
+    gp = gp.at[:, 1:n_rows + 1].add(g[..., r:2 * r])
+    gp = gp.at[:, 2:n_rows + 2].add(g[..., 2 * r:3 * r])
+    return gp[:, 1:h + 1]
+
+
+def _elu_grad(a: jax.Array) -> jax.Array:
+    """d ELU / d input, from the ELU's output a: 1 where a > 0, else exp(u) = a + 1."""
+    return jnp.where(a > 0, 1.0, a + 1.0)
+
+
+def _matmul(x: jax.Array, t: jax.Array) -> jax.Array:
+    """[N, rows, K] @ [K, C] with T's bias row of zeros appended (forward: the ones column of
+    the stack contributes nothing; the bias is added exactly, outside the matmul)."""
+    t_aug = jnp.concatenate([t, jnp.zeros((1, t.shape[1]), t.dtype)], axis=0)
+    return jnp.matmul(x, t_aug)
+
+
+def _forward(maps, ts, biases, geom):
+    """maps [N, H, W] -> last layer's ELU output [N, H_L, W_L Cout_L] and the residuals."""
+    x = maps
+    res = []
+    n = maps.shape[0]
+    for (h, w, c_out, pooled), t, b in zip(geom, ts, biases, strict=True):
+        if pooled:
+            hp, wp = h // 2, w // 2
+            stack = _row_stack(x, 2 * hp)
+            z = _matmul(stack, t).reshape(n, hp, 2, 2, wp * c_out)
+            m = jnp.max(z, axis=(2, 3))
+            hit = (z == m[:, :, None, None]).reshape(n, hp, 4, wp * c_out)
+            bits = jnp.sum(hit.astype(jnp.uint8) << jnp.arange(4, dtype=jnp.uint8)[:, None],
+                           axis=2, dtype=jnp.uint8)
+            a = jax.nn.elu(m + jnp.tile(b, wp))
+            res.append((stack, bits, a))
+        else:
+            stack = _row_stack(x, h)
+            a = jax.nn.elu(_matmul(stack, t) + jnp.tile(b, w))
+            res.append((stack, None, a))
+        x = a
+    return x, res
+
+
+def _backward(geom, res, ts, g):
+    gts, gbs = [], []
+    for (h, w, c_out, pooled), t, (stack, bits, a) in zip(
+            reversed(geom), reversed(ts), reversed(res), strict=True):
+        n = stack.shape[0]
+        gm = g * _elu_grad(a)
+        if pooled:
+            hp, wp = h // 2, w // 2
+            hit = ((bits[:, :, None] >> jnp.arange(4, dtype=jnp.uint8)[:, None]) & 1).astype(
+                g.dtype)  # [N, hp, 4, wp Cout]
+            gz = (gm / jnp.sum(hit, axis=2))[:, :, None] * hit
+            gz = gz.reshape(n, 2 * hp, 2 * wp * c_out)
+        else:
+            gz = gm
+        k = stack.shape[-1]
+        gt_aug = jnp.matmul(stack.reshape(-1, k).T, gz.reshape(-1, gz.shape[-1]))
+        gts.append(gt_aug[:-1])
+        gbs.append(gt_aug[-1].reshape(-1, c_out).sum(axis=0))
+        g = _row_unstack(jnp.matmul(gz, t.T), h)
+    return gts[::-1], gbs[::-1], g
+
+
+def geometry(map_shape: tuple[int, int], channels: tuple[int, ...]) -> tuple:
+    """Per layer (input rows, input cols, output channels, pooled), for a [H, W] map."""
+    h, w = map_shape
+    out = []
+    for i, c in enumerate(channels):
+        pooled = i < len(channels) - 1
+        out.append((h, w, c, pooled))
+        if pooled:
+            h, w = h // 2, w // 2
+    return tuple(out)
+
+
+def _make(geom):
+    @jax.custom_vjp
+    def convs(maps, ts, biases):
+        return _forward(maps, ts, biases, geom)[0]
+
+    def fwd(maps, ts, biases):
+        out, res = _forward(maps, ts, biases, geom)
+        return out, (res, ts)
+
+    def bwd(saved, g):
+        res, ts = saved
+        gts, gbs, gmaps = _backward(geom, res, ts, g)
+        return gmaps, gts, gbs
+
+    convs.defvjp(fwd, bwd)
+    return convs
+
+
+_CACHE: dict = {}
+
+
+def conv_stack(maps: jax.Array, convs: list[dict]) -> jax.Array:
+    """maps [N, H, W] (one input channel) -> [N, H_L, W_L, C_L]: every conv layer of
+    ``convs`` ([{"w": [3, 3, Cin, Cout], "b": [Cout]}, ...]) with its ELU, 2x2 max-pool after
+    all but the last."""
+    channels = tuple(int(p["w"].shape[-1]) for p in convs)
+    geom = geometry(tuple(maps.shape[1:]), channels)
+    if geom not in _CACHE:
+        _CACHE[geom] = _make(geom)
+    ts = [toeplitz(p["w"], w, pooled) for (_, w, _, pooled), p in zip(geom, convs, strict=True)]
+    out = _CACHE[geom](maps, ts, [p["b"] for p in convs])
+    h, w, c, _ = geom[-1]
+    return out.reshape(maps.shape[0], h, w, c)
