@@ -7,8 +7,9 @@ of a scalar loss of ``networks.encode`` wrt the params (float32, the stair layou
 + a 21x21 map, default NetworkConfig) and reports the median ms of ``--repeats`` calls after
 warm-up. 'row' is also timed under jax.default_matmul_precision("float32"): if that is slower
 than the default, the default matmuls ran in TF32. 'row_bf16' (bfloat16 operands, float32
-accumulation) is timed beside them; its gradient difference says what the rounding costs. 'fused' (the conv
-stack with its written-out backward pass) is timed in the default precision and in float32.
+accumulation) is timed beside them; its gradient difference says what the rounding costs.
+'fused' (the conv stack with its written-out backward pass) is timed in the default precision
+and in float32.
 """
 
 from __future__ import annotations
