@@ -205,7 +205,7 @@ def test_row_bf16_encoder_is_close_to_float32():
 
 def test_auto_conv_impl_picks_by_backend():
     assert NetworkConfig().conv_impl == "auto"
-    want = networks.CONV_IMPLS["row" if jax.default_backend() == "gpu" else "xla"]
+    want = networks.CONV_IMPLS["fused" if jax.default_backend() == "gpu" else "xla"]
     assert networks._conv_fn("auto") is want
 
 
