@@ -404,10 +404,13 @@ class StairEnv(Env):
         data0 = state.pipeline_state
         if self._push_steps:
             data0 = self._push(data0, info)
-        data = jax.lax.scan(physics, data0, None, length=c.decimation)[0]
+        with jax.named_scope("physics"):  # scopes name the pieces in a profiler trace
+            data = jax.lax.scan(physics, data0, None, length=c.decimation)[0]
         torque = data.ctrl
         finite = jnp.all(jnp.isfinite(data.qpos)) & jnp.all(jnp.isfinite(data.qvel))
-        data = jax.tree_util.tree_map(lambda new, old: jnp.where(finite, new, old), data, data0)
+        with jax.named_scope("nan_guard"):
+            data = jax.tree_util.tree_map(lambda new, old: jnp.where(finite, new, old), data,
+                                          data0)
 
         # Quantities of the robot after the step.
         qpos, qvel = data.qpos, data.qvel
@@ -425,7 +428,8 @@ class StairEnv(Env):
         path = jnp.where(
             planar_goal_distance < c.rewards.straight_within, jnp.linalg.norm(to_goal), path
         )
-        touching = self._sphere_contacts(data)
+        with jax.named_scope("contacts"):
+            touching = self._sphere_contacts(data)
         foot = touching["foot"]
         air_time = info["air_time"] + self._dt
         first_contact = foot & ~info["last_foot_contact"]
@@ -455,7 +459,8 @@ class StairEnv(Env):
             first_contact=first_contact,
             air_time=air_time,
         )
-        reward, terms = rw.compute(q, c.rewards, self._dt)
+        with jax.named_scope("rewards"):
+            reward, terms = rw.compute(q, c.rewards, self._dt)
 
         # Success: close and slow, held for success_hold_s.
         close = (planar_goal_distance < c.success_distance) & (planar_speed < c.success_speed)
@@ -501,7 +506,8 @@ class StairEnv(Env):
             next_level = cur.next_level(level, moved_up, self.num_levels, k_level, c.curriculum)
         else:
             next_level = level
-        fresh = self.reset_at(k_reset, next_level, info["family"])
+        with jax.named_scope("auto_reset"):
+            fresh = self.reset_at(k_reset, next_level, info["family"])
         pick = lambda new, old: jnp.where(done, new, old)
         data = data.replace(
             qpos=pick(fresh.pipeline_state.qpos, data.qpos),
@@ -640,6 +646,10 @@ class StairEnv(Env):
     ) -> dict[str, jnp.ndarray]:
         """Actor (noisy) and critic (clean) observations [49 + 441] from qpos/qvel alone; with
         `rng` None both are clean. `arc` (optional): see `goal_target`."""
+        with jax.named_scope("observe"):
+            return self._observe_unscoped(qpos, qvel, info, rng, arc)
+
+    def _observe_unscoped(self, qpos, qvel, info, rng, arc):
         pos, rot = qpos[:3], quat_to_mat(qpos[3:7])
         yaw = jnp.arctan2(rot[1, 0], rot[0, 0])
         goal = self.goal_target(pos, info["tile"], arc)

@@ -5,9 +5,11 @@
 
 Compiles the trainer's chunk, runs it once to warm up, then runs one chunk under
 ``jax.profiler.trace`` with a Perfetto trace. The trace's device events are summed (a) by the
-trainer's named scopes in each event's op name (``rollout``, ``ppo_update``, the rest, and
-whether inside the CNN ``encoder``), (b) by the first components of that op name and (c) by HLO
-op (the 40 largest of each), against the chunk's wall time. Kernels can overlap on several
+trainer's named scopes in each event's op name (``rollout``, ``ppo_update``, the rest, and whether
+inside the CNN ``encoder``), (b) by the first components of that op name and (c) by HLO op (the 40
+largest of each, with their op names), against the chunk's wall time; the rollout's time also by the
+env step's named pieces (physics, nan_guard, contacts, rewards, auto_reset, observe; a reset's
+observation counts as auto_reset) and by deeper op-name paths. Kernels can overlap on several
 streams, so the sums are busy time, not wall time. cuBLAS kernels inside a CUDA graph carry no
 instruction name; run with XLA_FLAGS=--xla_gpu_enable_command_buffer= to attribute them too.
 """
@@ -41,6 +43,8 @@ def _events(trace_dir: str) -> tuple[list[dict], dict[int, str]]:
     return events, names
 
 
+# named scopes of StairEnv.step, in the order a kernel's op name is matched against them
+ENV_PIECES = ("physics", "nan_guard", "contacts", "rewards", "auto_reset", "observe", "encoder")
 _INSTR = re.compile(r'^\s*(?:ROOT\s+)?%?([\w.\-]+) = .*?op_name="([^"]*)"')
 _NOISE = re.compile(r"^(jit\(\w+\)|while|body|cond|closed_call|checkpoint|pjit\(\w*\))$")
 
@@ -90,6 +94,9 @@ def main() -> None:
     by_scope: dict[str, float] = collections.Counter()
     by_path: dict[str, float] = collections.Counter()
     by_kernel: dict[str, float] = collections.Counter()
+    by_piece: dict[str, float] = collections.Counter()
+    by_deep_path: dict[str, float] = collections.Counter()
+    op_of_kernel: dict[str, str] = {}
     sample_args = []
     for e in events:
         hlo_op = e.get("args", {}).get("hlo_op")
@@ -103,6 +110,12 @@ def main() -> None:
         if "encoder" in op_name:
             by_scope[scope + "/encoder"] += dur
         by_path[_scope_path(op_name, 4)] += dur
+        if scope == "rollout":  # the env step's named pieces (mjx_stairs/env.py)
+            piece = next((p for p in ENV_PIECES  # under vmap a scope reads "vmap(name)"
+                          if f"/{p}/" in f"/{op_name}/" or f"({p})" in op_name), "rest")
+            by_piece[piece] += dur
+            by_deep_path[_scope_path(op_name, 8)] += dur
+        op_of_kernel[f"{hlo_op} [{e.get('name', '?')[:60]}]"] = _scope_path(op_name, 8)
         by_kernel[f"{hlo_op} [{e.get('name', '?')[:60]}]"] += dur
         if len(sample_args) < 5:
             sample_args.append({"name": e.get("name"), "args": e["args"], "op_name": op_name})
@@ -119,6 +132,9 @@ def main() -> None:
         "busy_ms_by_scope": dict(by_scope),
         "busy_ms_top_scope_paths": dict(by_path.most_common(40)),
         "busy_ms_top_kernels": dict(by_kernel.most_common(40)),
+        "busy_ms_rollout_by_env_piece": dict(by_piece),
+        "busy_ms_rollout_top_paths": dict(by_deep_path.most_common(40)),
+        "top_kernel_ops": {k: op_of_kernel[k] for k, _ in by_kernel.most_common(40)},
         "kernels": len(by_kernel),
         "sample_event_args": sample_args,
     }
