@@ -14,8 +14,9 @@ every layer but the last, conv -> ELU for the last), computed with fewer passes 
 - The backward pass is written out: per layer one elementwise pass (ELU derivative, the pooling
   gradient routed to the window's maxima, split equally between ties as jax's max gradient
   does), one matmul for the weights (the bias gradient rides in it as a column of ones on the
-  input rows) and one for the input. Forward saves the row stacks, the ELU outputs and a byte
-  per pooled value saying which of its four positions held the max.
+  input rows, padded with zeros to an aligned width) and one for the input. Forward saves the
+  row stacks, the ELU outputs and a byte per pooled value saying which of its four positions
+  held the max (computed in the same pass as the max).
 
 Params are those of ``networks`` (the kernels [3, 3, Cin, Cout] and biases [Cout]); the
 Toeplitz matrices are built from them outside the custom VJP, so their gradient folds back into
@@ -61,14 +62,22 @@ def toeplitz(kernel: jax.Array, w_in: int, pooled: bool) -> jax.Array:
     return t.reshape(3 * w_in * c_in, len(cols) * c_out)
 
 
+def _stack_width(r: int) -> int:
+    """Columns of a row stack of rows with r floats: 3 r, the ones column, zeros up to a
+    multiple of 16 (an unaligned K, such as 241, sends cuBLAS to kernels ~2x slower)."""
+    return -(-(3 * r + 1) // 16) * 16
+
+
 def _row_stack(x: jax.Array, n_rows: int) -> jax.Array:
-    """[N, H, R] -> [N, n_rows, 3 R + 1]: for output row o, input rows o-1, o, o+1 (zeros past
-    the edges) side by side, then a 1 (the bias column of the weight gradient)."""
+    """[N, H, R] -> [N, n_rows, _stack_width(R)]: for output row o, input rows o-1, o, o+1
+    (zeros past the edges) side by side, then a 1 (the bias column of the weight gradient),
+    then zeros."""
     n, h, r = x.shape
     xp = jnp.pad(x, ((0, 0), (1, max(n_rows + 1 - h, 0)), (0, 0)))
     ones = jnp.ones((n, n_rows, 1), x.dtype)
-    return jnp.concatenate([xp[:, :n_rows], xp[:, 1:n_rows + 1], xp[:, 2:n_rows + 2], ones],
-                           axis=-1)
+    zeros = jnp.zeros((n, n_rows, _stack_width(r) - 3 * r - 1), x.dtype)
+    return jnp.concatenate(
+        [xp[:, :n_rows], xp[:, 1:n_rows + 1], xp[:, 2:n_rows + 2], ones, zeros], axis=-1)
 
 
 def _row_unstack(g: jax.Array, h: int) -> jax.Array:
@@ -88,10 +97,20 @@ def _elu_grad(a: jax.Array) -> jax.Array:
 
 
 def _matmul(x: jax.Array, t: jax.Array) -> jax.Array:
-    """[N, rows, K] @ [K, C] with T's bias row of zeros appended (forward: the ones column of
-    the stack contributes nothing; the bias is added exactly, outside the matmul)."""
-    t_aug = jnp.concatenate([t, jnp.zeros((1, t.shape[1]), t.dtype)], axis=0)
+    """[N, rows, K'] @ T [K, C] with zero rows appended to T for the stack's ones column and
+    padding (forward: they contribute nothing; the bias is added exactly, outside the matmul)."""
+    t_aug = jnp.concatenate([t, jnp.zeros((x.shape[-1] - t.shape[0], t.shape[1]), t.dtype)])
     return jnp.matmul(x, t_aug)
+
+
+def _pool4(z: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """z [N, hp, 2, 2, C] (the four positions of each 2x2 window) -> (their max [N, hp, C], a
+    byte [N, hp, C] whose bit 2 q + p says position (q, p) holds it). Elementwise over the four
+    slices, so XLA computes both in one pass over z."""
+    zs = [z[:, :, q, p] for q in (0, 1) for p in (0, 1)]
+    m = jnp.maximum(jnp.maximum(zs[0], zs[1]), jnp.maximum(zs[2], zs[3]))
+    bits = sum(((zk == m).astype(jnp.uint8) << k) for k, zk in enumerate(zs))
+    return m, bits.astype(jnp.uint8)
 
 
 def _forward(maps, ts, biases, geom):
@@ -103,11 +122,7 @@ def _forward(maps, ts, biases, geom):
         if pooled:
             hp, wp = h // 2, w // 2
             stack = _row_stack(x, 2 * hp)
-            z = _matmul(stack, t).reshape(n, hp, 2, 2, wp * c_out)
-            m = jnp.max(z, axis=(2, 3))
-            hit = (z == m[:, :, None, None]).reshape(n, hp, 4, wp * c_out)
-            bits = jnp.sum(hit.astype(jnp.uint8) << jnp.arange(4, dtype=jnp.uint8)[:, None],
-                           axis=2, dtype=jnp.uint8)
+            m, bits = _pool4(_matmul(stack, t).reshape(n, hp, 2, 2, wp * c_out))
             a = jax.nn.elu(m + jnp.tile(b, wp))
             res.append((stack, bits, a))
         else:
@@ -132,10 +147,10 @@ def _backward(geom, res, ts, g):
             gz = gz.reshape(n, 2 * hp, 2 * wp * c_out)
         else:
             gz = gm
-        k = stack.shape[-1]
+        k, rows = stack.shape[-1], t.shape[0]
         gt_aug = jnp.matmul(stack.reshape(-1, k).T, gz.reshape(-1, gz.shape[-1]))
-        gts.append(gt_aug[:-1])
-        gbs.append(gt_aug[-1].reshape(-1, c_out).sum(axis=0))
+        gts.append(gt_aug[:rows])
+        gbs.append(gt_aug[rows].reshape(-1, c_out).sum(axis=0))  # the ones column's row
         g = _row_unstack(jnp.matmul(gz, t.T), h)
     return gts[::-1], gbs[::-1], g
 
