@@ -147,12 +147,14 @@ for step in "$@"; do
         experiments/stage2_u_lean.toml network.conv_impl=fused --robots 4096 ;;
     # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
     # for the budget of the other lean runs), then evaluated in the reference physics
+    # (FUSED_NAME names the run, stage2_u_lean_fused unless set)
     stage2-lean-fused)
-      train stage2_u_lean_fused experiments/stage2_u_lean.toml network.conv_impl=fused \
-        train.experiment=stage2_u_lean_fused
-      python3 -m mjx_stairs eval --checkpoint /tmp/policies/stage2_u_lean_fused.npz \
+      name=${FUSED_NAME:-stage2_u_lean_fused}
+      train "$name" experiments/stage2_u_lean.toml network.conv_impl=fused \
+        train.experiment="$name"
+      python3 -m mjx_stairs eval --checkpoint "/tmp/policies/$name.npz" \
         --robots 1000 --env $REFERENCE \
-        --out "$OUT/stage2_u_lean_fused/eval_reference_physics" 2>&1 | grep -v warp ;;
+        --out "$OUT/$name/eval_reference_physics" 2>&1 | grep -v warp ;;
     bench16384-lean) bench "$OUT/bench/abc_lean_16384.json" experiments/stage2_u_lean.toml \
         --robots 16384 ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;

@@ -135,6 +135,8 @@ def main() -> None:
         "busy_ms_rollout_by_env_piece": dict(by_piece),
         "busy_ms_rollout_top_paths": dict(by_deep_path.most_common(40)),
         "top_kernel_ops": {k: op_of_kernel[k] for k, _ in by_kernel.most_common(40)},
+        "busy_ms_top_unattributed_kernels": dict(collections.Counter(
+            {k: v for k, v in by_kernel.items() if op_of_kernel[k] == "?"}).most_common(20)),
         "kernels": len(by_kernel),
         "sample_event_args": sample_args,
     }
