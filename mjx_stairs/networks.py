@@ -76,9 +76,9 @@ class NetworkConfig:
     conv_impl: str = field(
         default="auto",
         metadata={"help": "how the 3x3 convs are computed, not what: 'xla' (lax.conv), 'row' "
-                  "(row-Toeplitz matmuls, faster on GPUs for these tiny maps: 6.8 vs 10.3 ms "
+                  "(row-Toeplitz matmuls, faster on GPUs for these tiny maps: 6.8 vs 10.7 ms "
                   "fwd+bwd on an H100), 'fused' (the conv stack as one function with a "
-                  "written-out backward pass: 5.9 ms) or 'auto' (fused on a GPU, xla "
+                  "written-out backward pass: 4.65 ms) or 'auto' (fused on a GPU, xla "
                   "elsewhere); 'row_bf16' rounds the conv operands to bfloat16 (not the same "
                   "function; an experiment)"},
     )
