@@ -25,6 +25,8 @@ the kernels by ordinary autodiff.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -134,6 +136,7 @@ def _forward(maps, ts, biases, geom):
 
 
 def _backward(geom, res, ts, g):
+    """The gradient g of the last layer's output -> (grads of ts, of biases, of the maps)."""
     gts, gbs = [], []
     for (h, w, c_out, pooled), t, (stack, bits, a) in zip(
             reversed(geom), reversed(ts), reversed(res), strict=True):
@@ -167,7 +170,10 @@ def geometry(map_shape: tuple[int, int], channels: tuple[int, ...]) -> tuple:
     return tuple(out)
 
 
+@functools.lru_cache(maxsize=None)
 def _make(geom):
+    """The custom-VJP conv stack for one geometry (static, hashable)."""
+
     @jax.custom_vjp
     def convs(maps, ts, biases):
         return _forward(maps, ts, biases, geom)[0]
@@ -185,18 +191,13 @@ def _make(geom):
     return convs
 
 
-_CACHE: dict = {}
-
-
 def conv_stack(maps: jax.Array, convs: list[dict]) -> jax.Array:
     """maps [N, H, W] (one input channel) -> [N, H_L, W_L, C_L]: every conv layer of
     ``convs`` ([{"w": [3, 3, Cin, Cout], "b": [Cout]}, ...]) with its ELU, 2x2 max-pool after
     all but the last."""
     channels = tuple(int(p["w"].shape[-1]) for p in convs)
     geom = geometry(tuple(maps.shape[1:]), channels)
-    if geom not in _CACHE:
-        _CACHE[geom] = _make(geom)
     ts = [toeplitz(p["w"], w, pooled) for (_, w, _, pooled), p in zip(geom, convs, strict=True)]
-    out = _CACHE[geom](maps, ts, [p["b"] for p in convs])
+    out = _make(geom)(maps, ts, [p["b"] for p in convs])
     h, w, c, _ = geom[-1]
     return out.reshape(maps.shape[0], h, w, c)
