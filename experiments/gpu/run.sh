@@ -9,7 +9,7 @@
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
 # trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
-# bench4096-fused-abcr, stage2-lean-fused, report. Each training step stops and
+# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -145,6 +145,13 @@ for step in "$@"; do
         network.conv_impl=fused --robots 4096 ;;
     bench4096-fused-abcr) bench "$OUT/bench/abcr_lean_fused_sums.json" \
         experiments/stage2_u_lean.toml network.conv_impl=fused --robots 4096 ;;
+    # XLA's Triton GEMM fusions off (every matmul to cuBLAS): the encoder alone, then (a), (c)
+    bench4096-no-triton-gemm) mkdir -p "$OUT/bench"
+      XLA_FLAGS=--xla_gpu_enable_triton_gemm=false python3 experiments/gpu/encoder_bench.py \
+        --batch 49152 --out "$OUT/bench/encoder_no_triton_gemm.json" 2>&1 | grep -v warp
+      XLA_FLAGS=--xla_gpu_enable_triton_gemm=false bench \
+        "$OUT/bench/ac_lean_fused_no_triton_gemm.json" experiments/stage2_u_lean.toml \
+        --robots 4096 --parts physics,train ;;
     # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
     # for the budget of the other lean runs), then evaluated in the reference physics
     # (FUSED_NAME names the run, stage2_u_lean_fused unless set)
