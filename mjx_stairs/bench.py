@@ -129,8 +129,7 @@ def bench_rollout(config: ExperimentConfig, env, repeats: int) -> dict[str, floa
 
 def _split(row: dict[str, Any], steps_per_iteration: int) -> dict[str, float]:
     """Seconds of one training iteration spent in each layer, from the rates of one run."""
-    sec = {k: steps_per_iteration / row[k]["steps_per_s"]
-           for k in ("physics", "env", "rollout", "train") if k in row}
+    sec = {k: steps_per_iteration / row[k]["steps_per_s"] for k in PARTS if k in row}
     out = {}
     layers = [("physics", None, "physics"), ("env_overhead", "physics", "env"),
               ("policy_and_values", "env", "rollout"), ("update", "rollout", "train")]
@@ -138,6 +137,9 @@ def _split(row: dict[str, Any], steps_per_iteration: int) -> dict[str, float]:
         if top in sec and (below is None or below in sec):
             out[name] = sec[top] - (sec[below] if below else 0.0)
     return out
+
+
+PARTS = ("physics", "env", "rollout", "train")  # (a), (b), (r), (c)
 
 
 def _memory() -> dict[str, float]:
@@ -150,13 +152,13 @@ def run_bench(
     robots: list[int],
     steps: int = 24,
     repeats: int = 5,
-    parts: tuple[str, ...] = ("physics", "env", "rollout", "train"),
+    parts: tuple[str, ...] = PARTS,
 ) -> dict[str, Any]:
     """Measure (a), (b), (r), (c) for each robot count with one model and atlas."""
-    unknown = set(parts) - {"physics", "env", "rollout", "train"}
+    unknown = set(parts) - set(PARTS)
     if unknown:
-        raise ValueError(f"bench: unknown parts {sorted(unknown)} (expected physics, env, "
-                         "rollout, train)")
+        raise ValueError(f"bench: unknown parts {sorted(unknown)} (expected "
+                         f"{', '.join(PARTS)})")
     env = make_env(config)
     out: dict[str, Any] = {
         "device": jax.devices()[0].device_kind,

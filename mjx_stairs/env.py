@@ -496,7 +496,8 @@ class StairEnv(Env):
             success=success,
         )
         k_noise, k_reset, info["rng"] = jax.random.split(info["rng"], 3)
-        final_obs = self._observe(qpos, qvel, info, k_noise, arc=arc)
+        with jax.named_scope("observe"):  # a reset's observation counts as auto_reset
+            final_obs = self._observe(qpos, qvel, info, k_noise, arc=arc)
 
         # Curriculum, then auto-reset of the robots whose episode ended.
         level = info["level"]
@@ -646,10 +647,6 @@ class StairEnv(Env):
     ) -> dict[str, jnp.ndarray]:
         """Actor (noisy) and critic (clean) observations [49 + 441] from qpos/qvel alone; with
         `rng` None both are clean. `arc` (optional): see `goal_target`."""
-        with jax.named_scope("observe"):
-            return self._observe_unscoped(qpos, qvel, info, rng, arc)
-
-    def _observe_unscoped(self, qpos, qvel, info, rng, arc):
         pos, rot = qpos[:3], quat_to_mat(qpos[3:7])
         yaw = jnp.arctan2(rot[1, 0], rot[0, 0])
         goal = self.goal_target(pos, info["tile"], arc)

@@ -3,11 +3,11 @@
 Same function as the per-layer paths in ``networks`` (3x3 SAME conv -> ELU -> 2x2 max-pool for
 every layer but the last, conv -> ELU for the last), computed with fewer passes over memory:
 
-- Each conv is one row-Toeplitz matmul (as ``networks._conv3x3_row``): the three neighbouring
-  input rows side by side, [N, rows, 3 W Cin], times a [3 W Cin, cols] matrix built from the
-  kernel. A pooled layer computes only the rows and columns its floor pooling keeps, and orders
-  the output columns by column parity, (parity, col // 2, cout), so that the 2x2 max is a max
-  over four contiguous blocks of the [N, H/2, 2, 2, W/2 Cout] result.
+- Each conv is one row-Toeplitz matmul (``toeplitz``, which ``networks._conv3x3_row`` uses too):
+  the three neighbouring input rows side by side, [N, rows, 3 W Cin], times a [3 W Cin, cols]
+  matrix built from the kernel. A pooled layer computes only the rows and columns its floor
+  pooling keeps, and orders the output columns by column parity, (parity, col // 2, cout), so that
+  the 2x2 max is a max over four contiguous blocks of the [N, H/2, 2, 2, W/2 Cout] result.
 - Pooling comes before the ELU and the bias: both are monotone in each position and the bias
   is the same within a window, so max(ELU(z + b)) = ELU(max(z) + b), with a quarter of the
   ELU work.

@@ -35,7 +35,6 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from mjx_stairs import fused_encoder
 
@@ -222,35 +221,12 @@ def _conv3x3(x: jax.Array, p: Params) -> jax.Array:
     return y + p["b"]
 
 
-@functools.lru_cache(maxsize=None)
-def _width_shifts(w: int) -> np.ndarray:
-    """Constant 0/1 tensor S [3 (kx), w (input col), w (output col)]: S[kx, i, o] = 1 where
-    i = o + kx - 1 lies inside the row (columns outside are SAME padding's zeros)."""
-    s = np.zeros((3, w, w), np.float32)
-    for kx in range(3):
-        o = np.arange(w)
-        i = o + kx - 1
-        ok = (i >= 0) & (i < w)
-        s[kx, i[ok], o[ok]] = 1.0
-    s.setflags(write=False)
-    return s
-
-
-def _row_toeplitz(k: jax.Array, w: int) -> jax.Array:
-    """Kernel [3, 3, Cin, Cout] -> T [3 * w * Cin, w * Cout], rows ordered (ky, col, cin),
-    columns (col, cout): one matmul of the 3 stacked neighbouring rows with T is the conv.
-    HIGHEST precision so a TF32 default cannot round the weights: S only selects them."""
-    c_in, c_out = k.shape[2], k.shape[3]
-    t = jnp.einsum("xio,yxcd->yicod", _width_shifts(w), k,
-                   precision=jax.lax.Precision.HIGHEST)
-    return t.reshape(3 * w * c_in, w * c_out)
-
-
 def _conv3x3_row(x: jax.Array, p: Params, operand_dtype: Any = jnp.float32) -> jax.Array:
     """``_conv3x3`` as one batched matmul (row-Toeplitz): [N, H, W, Cin] -> [N, H, W, Cout].
 
     Rows h-1, h, h+1 (zero rows past the edges) are concatenated into [N, H, 3 W Cin] and
-    multiplied by ``_row_toeplitz``, which holds the width shifts and their zero padding. For
+    multiplied by ``fused_encoder.toeplitz``, which holds the width shifts and their zero
+    padding (rows (ky, col, cin), columns (col, cout)). For
     these tiny maps a dense matmul beats cuDNN's launch- and layout-bound small convs.
     ``operand_dtype`` bfloat16 rounds both matmul operands (float32 accumulation, the tensor
     cores' fast path): NOT the same function then."""
@@ -258,16 +234,32 @@ def _conv3x3_row(x: jax.Array, p: Params, operand_dtype: Any = jnp.float32) -> j
     c_out = p["w"].shape[-1]
     xp = jnp.pad(x.reshape(n, h, w * c_in).astype(operand_dtype), ((0, 0), (1, 1), (0, 0)))
     rows = jnp.concatenate([xp[:, :h], xp[:, 1 : h + 1], xp[:, 2:]], axis=-1)
-    t = _row_toeplitz(p["w"], w).astype(operand_dtype)
+    t = fused_encoder.toeplitz(p["w"], w, pooled=False).astype(operand_dtype)
     y = jnp.matmul(rows, t, preferred_element_type=jnp.float32)
     return y.reshape(n, h, w, c_out) + p["b"]
 
 
+def _layer_by_layer(conv):
+    """A conv stack from a per-layer conv: maps [N, H, W] -> [N, H_L, W_L, C_L], each layer
+    conv -> ELU, a 2x2 max-pool after all but the last."""
+
+    def stack(maps: jax.Array, convs: list[Params]) -> jax.Array:
+        x = maps[..., None]
+        for i, p in enumerate(convs):
+            x = jax.nn.elu(conv(x, p))
+            if i < len(convs) - 1:
+                x = _maxpool2(x)
+        return x
+
+    return stack
+
+
+# conv_impl -> the conv stack; all compute the same function ('row_bf16' up to rounding)
 CONV_IMPLS = {
-    "xla": _conv3x3,
-    "row": _conv3x3_row,
-    "row_bf16": functools.partial(_conv3x3_row, operand_dtype=jnp.bfloat16),
-    "fused": None,  # the whole conv stack in one custom-VJP function: fused_encoder.conv_stack
+    "xla": _layer_by_layer(_conv3x3),
+    "row": _layer_by_layer(_conv3x3_row),
+    "row_bf16": _layer_by_layer(functools.partial(_conv3x3_row, operand_dtype=jnp.bfloat16)),
+    "fused": fused_encoder.conv_stack,  # one custom-VJP function for the whole stack
 }
 
 
@@ -323,7 +315,7 @@ def encode(
     Without a map (``layout.map_shape == ()``) the obs is returned unchanged. ``conv_impl``
     (NetworkConfig.conv_impl) picks how the 3x3 convs are computed, not what they compute.
     """
-    conv = _conv_fn(conv_impl)
+    conv_stack = _conv_fn(conv_impl)
     if not layout.map_shape:
         return obs
     if obs.shape[-1] != layout.obs_size:
@@ -332,16 +324,7 @@ def encode(
     lead = obs.shape[:-1]
     vec = obs[..., : layout.n_vec]
     with jax.named_scope("encoder"):  # names the CNN's kernels in a profiler trace
-        x = obs[..., layout.n_vec :].reshape(-1, *layout.map_shape)
-        if conv is None:  # "fused": the whole stack in one function
-            x = fused_encoder.conv_stack(x, enc["conv"])
-        else:
-            x = x[..., None]
-            n_conv = len(enc["conv"])
-            for i, p in enumerate(enc["conv"]):
-                x = jax.nn.elu(conv(x, p))
-                if i < n_conv - 1:
-                    x = _maxpool2(x)
+        x = conv_stack(obs[..., layout.n_vec :].reshape(-1, *layout.map_shape), enc["conv"])
         n_flat = enc["proj"]["w"].shape[0]
         c = x.shape[-1]
         pool_hw = _pool_hw_from(n_flat, c)

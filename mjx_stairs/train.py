@@ -302,7 +302,7 @@ def rollout_step(carry, key, *, env, params, norm, net_cfg: NetworkConfig, layou
     ep_length = ep_length * (1.0 - done)
     sums = _robot_sums(per_robot)
     n = done.shape[0]
-    ep_stats = {k[4:]: v for k, v in sums.items() if k.startswith("_ep/")}
+    ep_stats = {k.removeprefix("_ep/"): v for k, v in sums.items() if k.startswith("_ep/")}
     env_metrics = {k: v / n for k, v in sums.items() if not k.startswith("_ep/")}
     tr = Transition(obs, critic_obs, action, log_prob, mean, value, next_state.reward.astype(
         jnp.float32), done, truncation, final_value, final_obs)

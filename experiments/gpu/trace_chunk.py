@@ -110,13 +110,15 @@ def main() -> None:
         if "encoder" in op_name:
             by_scope[scope + "/encoder"] += dur
         by_path[_scope_path(op_name, 4)] += dur
+        deep = _scope_path(op_name, 8)
         if scope == "rollout":  # the env step's named pieces (mjx_stairs/env.py)
             piece = next((p for p in ENV_PIECES  # under vmap a scope reads "vmap(name)"
                           if f"/{p}/" in f"/{op_name}/" or f"({p})" in op_name), "rest")
             by_piece[piece] += dur
-            by_deep_path[_scope_path(op_name, 8)] += dur
-        op_of_kernel[f"{hlo_op} [{e.get('name', '?')[:60]}]"] = _scope_path(op_name, 8)
-        by_kernel[f"{hlo_op} [{e.get('name', '?')[:60]}]"] += dur
+            by_deep_path[deep] += dur
+        kernel = f"{hlo_op} [{e.get('name', '?')[:60]}]"
+        op_of_kernel[kernel] = deep
+        by_kernel[kernel] += dur
         if len(sample_args) < 5:
             sample_args.append({"name": e.get("name"), "args": e["args"], "op_name": op_name})
     tc = config.train
