@@ -21,6 +21,13 @@ every layer but the last, conv -> ELU for the last), computed with fewer passes 
 Params are those of ``networks`` (the kernels [3, 3, Cin, Cout] and biases [Cout]); the
 Toeplitz matrices are built from them outside the custom VJP, so their gradient folds back into
 the kernels by ordinary autodiff.
+
+``dtype`` bfloat16 (conv_impl "fused_bf16") stores what the stack writes to memory in bfloat16:
+the row stacks and the matmul operands, the pre-pool conv outputs, the ELU outputs and the
+pre-pool gradients. Matmuls accumulate in float32, the ELU and its derivative are computed in
+float32, and the weight and bias gradients come out of their matmul in float32. The encoder is
+memory-bound at this size, so this halves most of its traffic; it is NOT the same function (the
+rounding of every stored value, about 3 significant digits).
 """
 
 from __future__ import annotations
@@ -100,9 +107,11 @@ def _elu_grad(a: jax.Array) -> jax.Array:
 
 def _matmul(x: jax.Array, t: jax.Array) -> jax.Array:
     """[N, rows, K'] @ T [K, C] with zero rows appended to T for the stack's ones column and
-    padding (forward: they contribute nothing; the bias is added exactly, outside the matmul)."""
+    padding (forward: they contribute nothing; the bias is added exactly, outside the matmul).
+    The result has x's dtype (a bfloat16 matmul still accumulates in float32)."""
+    t = t.astype(x.dtype)
     t_aug = jnp.concatenate([t, jnp.zeros((x.shape[-1] - t.shape[0], t.shape[1]), t.dtype)])
-    return jnp.matmul(x, t_aug)
+    return jnp.matmul(x, t_aug, preferred_element_type=x.dtype)
 
 
 def _pool4(z: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -115,9 +124,15 @@ def _pool4(z: jax.Array) -> tuple[jax.Array, jax.Array]:
     return m, bits.astype(jnp.uint8)
 
 
-def _forward(maps, ts, biases, geom):
-    """maps [N, H, W] -> last layer's ELU output [N, H_L, W_L Cout_L] and the residuals."""
-    x = maps
+def _elu(z: jax.Array, b: jax.Array, dtype) -> jax.Array:
+    """ELU(z + b) computed in float32, stored in ``dtype``."""
+    return jax.nn.elu(z.astype(jnp.float32) + b).astype(dtype)
+
+
+def _forward(maps, ts, biases, geom, dtype):
+    """maps [N, H, W] -> last layer's ELU output [N, H_L, W_L Cout_L] (float32) and the
+    residuals (in ``dtype``)."""
+    x = maps.astype(dtype)
     res = []
     n = maps.shape[0]
     for (h, w, c_out, pooled), t, b in zip(geom, ts, biases, strict=True):
@@ -125,36 +140,40 @@ def _forward(maps, ts, biases, geom):
             hp, wp = h // 2, w // 2
             stack = _row_stack(x, 2 * hp)
             m, bits = _pool4(_matmul(stack, t).reshape(n, hp, 2, 2, wp * c_out))
-            a = jax.nn.elu(m + jnp.tile(b, wp))
+            a = _elu(m, jnp.tile(b, wp), dtype)
             res.append((stack, bits, a))
         else:
             stack = _row_stack(x, h)
-            a = jax.nn.elu(_matmul(stack, t) + jnp.tile(b, w))
+            a = _elu(_matmul(stack, t), jnp.tile(b, w), dtype)
             res.append((stack, None, a))
         x = a
-    return x, res
+    return x.astype(jnp.float32), res
 
 
 def _backward(geom, res, ts, g):
-    """The gradient g of the last layer's output -> (grads of ts, of biases, of the maps)."""
+    """The gradient g of the last layer's output -> (grads of ts, of biases, of the maps), all
+    float32. The elementwise work is float32; the pre-pool gradient is stored in the stack's
+    dtype, the matmuls accumulate in float32."""
     gts, gbs = [], []
     for (h, w, c_out, pooled), t, (stack, bits, a) in zip(
             reversed(geom), reversed(ts), reversed(res), strict=True):
-        n = stack.shape[0]
-        gm = g * _elu_grad(a)
+        n, dtype = stack.shape[0], stack.dtype
+        gm = g.astype(jnp.float32) * _elu_grad(a.astype(jnp.float32))
         if pooled:
             hp, wp = h // 2, w // 2
             hit = ((bits[:, :, None] >> jnp.arange(4, dtype=jnp.uint8)[:, None]) & 1).astype(
-                g.dtype)  # [N, hp, 4, wp Cout]
+                jnp.float32)  # [N, hp, 4, wp Cout]
             gz = (gm / jnp.sum(hit, axis=2))[:, :, None] * hit
             gz = gz.reshape(n, 2 * hp, 2 * wp * c_out)
         else:
             gz = gm
+        gz = gz.astype(dtype)
         k, rows = stack.shape[-1], t.shape[0]
-        gt_aug = jnp.matmul(stack.reshape(-1, k).T, gz.reshape(-1, gz.shape[-1]))
+        gt_aug = jnp.matmul(stack.reshape(-1, k).T, gz.reshape(-1, gz.shape[-1]),
+                            preferred_element_type=jnp.float32)
         gts.append(gt_aug[:rows])
         gbs.append(gt_aug[rows].reshape(-1, c_out).sum(axis=0))  # the ones column's row
-        g = _row_unstack(jnp.matmul(gz, t.T), h)
+        g = _row_unstack(jnp.matmul(gz, t.T.astype(dtype), preferred_element_type=jnp.float32), h)
     return gts[::-1], gbs[::-1], g
 
 
@@ -171,15 +190,15 @@ def geometry(map_shape: tuple[int, int], channels: tuple[int, ...]) -> tuple:
 
 
 @functools.lru_cache(maxsize=None)
-def _make(geom):
-    """The custom-VJP conv stack for one geometry (static, hashable)."""
+def _make(geom, dtype):
+    """The custom-VJP conv stack for one geometry and storage dtype (static, hashable)."""
 
     @jax.custom_vjp
     def convs(maps, ts, biases):
-        return _forward(maps, ts, biases, geom)[0]
+        return _forward(maps, ts, biases, geom, dtype)[0]
 
     def fwd(maps, ts, biases):
-        out, res = _forward(maps, ts, biases, geom)
+        out, res = _forward(maps, ts, biases, geom, dtype)
         return out, (res, ts)
 
     def bwd(saved, g):
@@ -191,13 +210,14 @@ def _make(geom):
     return convs
 
 
-def conv_stack(maps: jax.Array, convs: list[dict]) -> jax.Array:
-    """maps [N, H, W] (one input channel) -> [N, H_L, W_L, C_L]: every conv layer of
+def conv_stack(maps: jax.Array, convs: list[dict], dtype=jnp.float32) -> jax.Array:
+    """maps [N, H, W] (one input channel) -> [N, H_L, W_L, C_L] float32: every conv layer of
     ``convs`` ([{"w": [3, 3, Cin, Cout], "b": [Cout]}, ...]) with its ELU, 2x2 max-pool after
-    all but the last."""
+    all but the last. ``dtype``: what the stack stores (float32, or bfloat16: see the module
+    docstring)."""
     channels = tuple(int(p["w"].shape[-1]) for p in convs)
     geom = geometry(tuple(maps.shape[1:]), channels)
     ts = [toeplitz(p["w"], w, pooled) for (_, w, _, pooled), p in zip(geom, convs, strict=True)]
-    out = _make(geom)(maps, ts, [p["b"] for p in convs])
+    out = _make(geom, jnp.dtype(dtype))(maps, ts, [p["b"] for p in convs])
     h, w, c, _ = geom[-1]
     return out.reshape(maps.shape[0], h, w, c)

@@ -78,8 +78,9 @@ class NetworkConfig:
                   "(row-Toeplitz matmuls, faster on GPUs for these tiny maps: 6.8 vs 10.7 ms "
                   "fwd+bwd on an H100), 'fused' (the conv stack as one function with a "
                   "written-out backward pass: 4.65 ms) or 'auto' (fused on a GPU, xla "
-                  "elsewhere); 'row_bf16' rounds the conv operands to bfloat16 (not the same "
-                  "function; an experiment)"},
+                  "elsewhere); 'row_bf16' rounds the conv operands to bfloat16 and 'fused_bf16' "
+                  "stores the fused stack's activations in bfloat16 (float32 accumulation; not "
+                  "the same function)"},
     )
 
 
@@ -254,12 +255,14 @@ def _layer_by_layer(conv):
     return stack
 
 
-# conv_impl -> the conv stack; all compute the same function ('row_bf16' up to rounding)
+# conv_impl -> the conv stack; all compute the same function (the bf16 ones up to rounding)
 CONV_IMPLS = {
     "xla": _layer_by_layer(_conv3x3),
     "row": _layer_by_layer(_conv3x3_row),
     "row_bf16": _layer_by_layer(functools.partial(_conv3x3_row, operand_dtype=jnp.bfloat16)),
     "fused": fused_encoder.conv_stack,  # one custom-VJP function for the whole stack
+    # the same, storing its activations, stacks and pre-pool gradients in bfloat16
+    "fused_bf16": functools.partial(fused_encoder.conv_stack, dtype=jnp.bfloat16),
 }
 
 

@@ -9,7 +9,7 @@ warm-up. 'row' is also timed under jax.default_matmul_precision("float32"): if t
 than the default, the default matmuls ran in TF32. 'row_bf16' (bfloat16 operands, float32
 accumulation) is timed beside them; its gradient difference says what the rounding costs.
 'fused' (the conv stack with its written-out backward pass) is timed in the default precision
-and in float32.
+and in float32, 'fused_bf16' (the same storing its activations in bfloat16) in the default.
 """
 
 from __future__ import annotations
@@ -63,7 +63,8 @@ def main() -> None:
                                   ("row_fp32", "row", "float32"),
                                   ("row_bf16", "row_bf16", None),
                                   ("fused", "fused", None),
-                                  ("fused_fp32", "fused", "float32")):
+                                  ("fused_fp32", "fused", "float32"),
+                                  ("fused_bf16", "fused_bf16", None)):
         with jax.default_matmul_precision(precision):  # None: the default
             g, f = make(impl)  # jit inside the context: precision is fixed at trace time
             ms = time_ms(g, (params, obs), args.repeats)

@@ -9,7 +9,7 @@
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
 # trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
-# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, report. Each training step stops and
+# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -152,12 +152,17 @@ for step in "$@"; do
       XLA_FLAGS=--xla_gpu_enable_triton_gemm=false bench \
         "$OUT/bench/ac_lean_fused_no_triton_gemm.json" experiments/stage2_u_lean.toml \
         --robots 4096 --parts physics,train ;;
+    # conv_impl=fused_bf16: the encoder alone against the others, then (a), (b), (r), (c)
+    bench4096-bf16) mkdir -p "$OUT/bench"; python3 experiments/gpu/encoder_bench.py \
+        --batch 49152 --out "$OUT/bench/encoder_bf16.json" 2>&1 | grep -v warp
+      bench "$OUT/bench/abcr_lean_fused_bf16.json" experiments/stage2_u_lean.toml \
+        network.conv_impl=fused_bf16 --robots 4096 ;;
     # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
     # for the budget of the other lean runs), then evaluated in the reference physics
-    # (FUSED_NAME names the run, stage2_u_lean_fused unless set)
+    # (FUSED_NAME names the run, stage2_u_lean_fused unless set; CONV_IMPL another conv_impl)
     stage2-lean-fused)
       name=${FUSED_NAME:-stage2_u_lean_fused}
-      train "$name" experiments/stage2_u_lean.toml network.conv_impl=fused \
+      train "$name" experiments/stage2_u_lean.toml network.conv_impl=${CONV_IMPL:-fused} \
         train.experiment="$name"
       python3 -m mjx_stairs eval --checkpoint "/tmp/policies/$name.npz" \
         --robots 1000 --env $REFERENCE \

@@ -203,6 +203,43 @@ def test_row_bf16_encoder_is_close_to_float32():
     assert 0.0 < err < 3e-2, err
 
 
+@pytest.mark.parametrize("flat", [False, True])
+def test_fused_bf16_encoder_is_close_to_float32(flat):
+    """conv_impl='fused_bf16' stores the stack's activations and pre-pool gradients in
+    bfloat16 (float32 accumulation): features and every encoder gradient close to, not equal
+    to, lax.conv in float32 (relative norm of the difference); its matmuls take bfloat16
+    operands."""
+    layout = ObsLayout(3, (21, 21))
+    cfg = NetworkConfig(latent_size=16, actor_hidden=(8,), critic_hidden=(8,))
+    p = _init(jax.random.PRNGKey(7), cfg, 3, (21, 21), 2)
+    k = jax.random.split(jax.random.PRNGKey(9), 4)
+    p["encoder"]["conv"] = [{"w": c["w"], "b": 0.3 * jax.random.normal(kk, c["b"].shape)}
+                            for c, kk in zip(p["encoder"]["conv"], k[:3], strict=True)]
+    obs = jax.random.normal(k[3], (6, layout.obs_size))
+    if flat:
+        obs = obs.at[:, 3:].set(0.3).at[0, 40].set(1.0)
+    weights = jnp.cos(jnp.arange(cfg.latent_size + 3, dtype=jnp.float32))
+
+    def loss(params, impl):
+        feat = networks.encode(params, obs, layout, conv_impl=impl)
+        return jnp.sum(jnp.sin(feat) * weights), feat
+
+    grad = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+    (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, "fused_bf16")
+    assert fb.dtype == jnp.float32
+    err = float(jnp.abs(fb - fa).max() / jnp.abs(fa).max())
+    assert 0.0 < err < 3e-2, err
+    for a, b in zip(jax.tree_util.tree_leaves(ga["encoder"]),
+                    jax.tree_util.tree_leaves(gb["encoder"]), strict=True):
+        assert b.dtype == jnp.float32
+        # a few per cent: besides the rounding, a pooling window whose top two values are
+        # within bfloat16's resolution may route its gradient to the other one
+        gerr = float(jnp.linalg.norm(b - a) / jnp.linalg.norm(a))
+        assert gerr < 6e-2, gerr
+    jaxpr = str(jax.make_jaxpr(lambda q: grad(q, "fused_bf16"))(p))
+    assert "bf16" in jaxpr and "preferred_element_type=bfloat16" in jaxpr
+
+
 def test_auto_conv_impl_picks_by_backend():
     assert NetworkConfig().conv_impl == "auto"
     want = networks.CONV_IMPLS["fused" if jax.default_backend() == "gpu" else "xla"]
