@@ -266,6 +266,10 @@ CONV_IMPLS = {
 }
 
 
+# conv_impls that round (training-speed settings): a loaded policy is computed in float32
+REDUCED_PRECISION_IMPLS = ("row_bf16", "fused_bf16")
+
+
 def _conv_fn(conv_impl: str):
     if conv_impl == "auto":  # resolved when traced: the backend the function compiles for
         conv_impl = "fused" if jax.default_backend() == "gpu" else "xla"

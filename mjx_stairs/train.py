@@ -636,7 +636,9 @@ class Policy(NamedTuple):
 
 
 def load_policy(path: str | Path) -> Policy:
-    """Read a policy file written by ``save_policy`` (validated against its own metadata)."""
+    """Read a policy file written by ``save_policy`` (validated against its own metadata).
+
+    A policy trained with a bfloat16 conv_impl is loaded with conv_impl "auto" (float32)."""
     from mjx_stairs.config import ConfigError, from_dict
 
     meta = checkpoint.load_metadata(path)
@@ -648,6 +650,10 @@ def load_policy(path: str | Path) -> Policy:
         a = int(meta["action_size"])
     except (KeyError, ConfigError, TypeError, ValueError) as e:
         raise checkpoint.CheckpointError(f"{path}: bad policy metadata ({e})") from None
+    if net_cfg.conv_impl in networks.REDUCED_PRECISION_IMPLS:
+        # eval, play, the critic map and export compute the policy in float32, as a robot
+        # would run it; a bfloat16 encoder is a training-speed setting (meta keeps what it was)
+        net_cfg = dataclasses.replace(net_cfg, conv_impl="auto")
     template = jax.eval_shape(lambda: {
         "params": networks.init_params(jax.random.PRNGKey(0), net_cfg, layout.n_vec,
                                        layout.map_shape, a),

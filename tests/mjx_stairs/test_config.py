@@ -152,3 +152,7 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
     assert cfg.env.robot.shin_collision is not fast
     assert cfg.env.robot.ls_iterations == (3 if fast else 5)
     assert cfg.env.robot.terrain_contacts == ("nearest" if lean else "mjx")
+    # the bfloat16 encoder only where its stage-2 training was checked
+    bf16 = path.name == "stage2_u_lean.toml"
+    assert cfg.network.conv_impl == ("fused_bf16" if bf16 else "auto")
+    assert experiment.load(path, [], cpu=True)[0].network.conv_impl == "auto"

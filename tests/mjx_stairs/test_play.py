@@ -299,3 +299,23 @@ def test_bad_inputs_one_line_errors(policy_file, tmp_path, capsys, case, extra, 
     err = [line for line in err if "warp" not in line]  # mujoco's note about the optional warp
     assert code == 2
     assert len(err) == 1 and err[0].startswith("mjx-stairs play: error:") and message in err[0]
+
+
+def test_a_policy_trained_with_a_bf16_encoder_loads_in_float32(policy_file, tmp_path):
+    """conv_impl 'fused_bf16' is a training setting: the loaded policy computes in float32
+    (the same actions as the policy saved with the default conv_impl), and its metadata still
+    says what it trained with."""
+    import dataclasses
+
+    cfg = ExperimentConfig()
+    cfg = dataclasses.replace(cfg, network=dataclasses.replace(cfg.network,
+                                                               conv_impl="fused_bf16"))
+    ref = train.load_policy(policy_file)
+    state = types.SimpleNamespace(params=ref.params, iteration=jnp.asarray(0, jnp.int32),
+                                  normalizer=ref.normalizer)
+    path = tmp_path / "bf16.npz"
+    train.save_policy(path, state, cfg, networks.ObsLayout(49, (21, 21)))
+    pol = train.load_policy(path)
+    assert pol.network.conv_impl == "auto" and pol.metadata["network"]["conv_impl"] == "fused_bf16"
+    obs = jax.random.normal(jax.random.PRNGKey(2), (4, 490))
+    np.testing.assert_array_equal(train.policy_action(pol, obs), train.policy_action(ref, obs))
