@@ -9,7 +9,7 @@
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
 # trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
-# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, report. Each training step stops and
+# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, encoder-hlo, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -173,6 +173,13 @@ for step in "$@"; do
       for name in ${EVAL_RUNS:-}; do
         python3 -m mjx_stairs eval --checkpoint "experiments/results/$name/policy.npz" \
           --robots 1000 --env $REFERENCE --out "$OUT/eval/$name" 2>&1 | grep -v warp
+      done ;;
+    # the optimised HLO of the encoder's forward + backward (fused and fused_bf16), to read the
+    # profile's kernel names back to ops
+    encoder-hlo) mkdir -p "$OUT/bench"
+      for impl in fused fused_bf16; do
+        python3 experiments/gpu/encoder_hlo.py --impl $impl \
+          --out "$OUT/bench/encoder_hlo_$impl.txt" 2>&1 | grep -v warp
       done ;;
     bench16384-lean) bench "$OUT/bench/abc_lean_16384.json" experiments/stage2_u_lean.toml \
         --robots 16384 ;;
