@@ -23,12 +23,11 @@ Toeplitz matrices are built from them outside the custom VJP, so their gradient 
 the kernels by ordinary autodiff.
 
 ``dtype`` bfloat16 (conv_impl "fused_bf16") stores what the stack writes to memory in bfloat16:
-the row stacks and the matmul operands, the pre-pool conv outputs, the ELU outputs, the
-pre-pool gradients and the gradients passed down between layers. Matmuls accumulate in float32,
-the ELU and its derivative are computed in float32, and the weight and bias gradients come out
-of their matmul in float32. The encoder is memory-bound at this size, so this halves most of its
-traffic; it is NOT the same function (the rounding of every stored value, about 3 significant
-digits).
+the row stacks and the matmul operands, the pre-pool conv outputs, the ELU outputs and the
+pre-pool gradients. Matmuls accumulate in float32, the ELU and its derivative are computed in
+float32, and the weight and bias gradients come out of their matmul in float32. The encoder is
+memory-bound at this size, so this halves most of its traffic; it is NOT the same function (the
+rounding of every stored value, about 3 significant digits).
 """
 
 from __future__ import annotations
@@ -151,19 +150,10 @@ def _forward(maps, ts, biases, geom, dtype):
     return x.astype(jnp.float32), res
 
 
-def _inverse_count(count: jax.Array) -> jax.Array:
-    """1 / count for a window's count of maxima (1 to 4) as selects, not a division: XLA keeps
-    a division apart from the 4x broadcast that follows it (one more pass over memory), and
-    fuses selects into it. 1/3 is the float nearest one third: within an ulp of x / 3."""
-    return jnp.where(count < 1.5, 1.0, jnp.where(count < 2.5, 0.5,
-                                                  jnp.where(count < 3.5, 1.0 / 3.0, 0.25)))
-
-
 def _backward(geom, res, ts, g):
-    """The gradient g of the last layer's output -> (grads of ts, of biases, of the maps). The
-    elementwise work is float32; the pre-pool gradient and the gradient passed down to the layer
-    below are stored in the stack's dtype; the matmuls accumulate in float32, and the weight and
-    bias gradients are float32."""
+    """The gradient g of the last layer's output -> (grads of ts, of biases, of the maps), all
+    float32. The elementwise work is float32; the pre-pool gradient is stored in the stack's
+    dtype, the matmuls accumulate in float32."""
     gts, gbs = [], []
     for (h, w, c_out, pooled), t, (stack, bits, a) in zip(
             reversed(geom), reversed(ts), reversed(res), strict=True):
@@ -173,7 +163,7 @@ def _backward(geom, res, ts, g):
             hp, wp = h // 2, w // 2
             hit = ((bits[:, :, None] >> jnp.arange(4, dtype=jnp.uint8)[:, None]) & 1).astype(
                 jnp.float32)  # [N, hp, 4, wp Cout]
-            gz = (gm * _inverse_count(jnp.sum(hit, axis=2)))[:, :, None] * hit
+            gz = (gm / jnp.sum(hit, axis=2))[:, :, None] * hit
             gz = gz.reshape(n, 2 * hp, 2 * wp * c_out)
         else:
             gz = gm
@@ -183,8 +173,8 @@ def _backward(geom, res, ts, g):
                             preferred_element_type=jnp.float32)
         gts.append(gt_aug[:rows])
         gbs.append(gt_aug[rows].reshape(-1, c_out).sum(axis=0))  # the ones column's row
-        g = _row_unstack(jnp.matmul(gz, t.T.astype(dtype), preferred_element_type=dtype), h)
-    return gts[::-1], gbs[::-1], g.astype(jnp.float32)
+        g = _row_unstack(jnp.matmul(gz, t.T.astype(dtype), preferred_element_type=jnp.float32), h)
+    return gts[::-1], gbs[::-1], g
 
 
 def geometry(map_shape: tuple[int, int], channels: tuple[int, ...]) -> tuple:
