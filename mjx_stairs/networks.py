@@ -79,8 +79,8 @@ class NetworkConfig:
                   "fwd+bwd on an H100), 'fused' (the conv stack as one function with a "
                   "written-out backward pass: 4.65 ms) or 'auto' (fused on a GPU, xla "
                   "elsewhere); 'row_bf16' rounds the conv operands to bfloat16 and 'fused_bf16' "
-                  "stores the fused stack's activations in bfloat16 (float32 accumulation; not "
-                  "the same function)"},
+                  "stores the fused stack's activations in bfloat16 (3.04 ms; float32 "
+                  "accumulation; not the same function; a loaded policy runs in float32)"},
     )
 
 
