@@ -28,6 +28,21 @@ from mjx_stairs.networks import NetworkConfig, ObsLayout
 LAYOUT = ObsLayout(49, (21, 21))  # env.N_VEC, the 21 x 21 height scan
 
 
+def default_params():
+    """The default NetworkConfig's params for the stair layout (12 actions)."""
+    return networks.init_params(jax.random.PRNGKey(0), NetworkConfig(), LAYOUT.n_vec,
+                                LAYOUT.map_shape, 12)
+
+
+def encoder_loss(impl: str):
+    """A scalar loss of the encoder's features, ``loss(params, obs)``, for one conv_impl."""
+
+    def loss(p, o):
+        return jnp.sum(jnp.sin(networks.encode(p, o, LAYOUT, conv_impl=impl)))
+
+    return loss
+
+
 def time_ms(fn, args, repeats: int) -> float:
     """Median milliseconds of fn(*args) over ``repeats`` calls after compile and one warm-up."""
     jax.block_until_ready(fn(*args))  # compile + warm-up
@@ -47,14 +62,11 @@ def main() -> None:
     ap.add_argument("--out", required=True, help="JSON file to write")
     args = ap.parse_args()
 
-    params = networks.init_params(jax.random.PRNGKey(0), NetworkConfig(), LAYOUT.n_vec,
-                                  LAYOUT.map_shape, 12)
+    params = default_params()
     obs = jax.random.normal(jax.random.PRNGKey(1), (args.batch, LAYOUT.obs_size), jnp.float32)
 
     def make(impl):
-        def loss(p, o):
-            return jnp.sum(jnp.sin(networks.encode(p, o, LAYOUT, conv_impl=impl)))
-
+        loss = encoder_loss(impl)
         return jax.jit(jax.grad(loss)), jax.jit(loss)
 
     grads, rows = {}, {}

@@ -2,9 +2,10 @@
 
     python3 experiments/gpu/encoder_hlo.py --impl fused_bf16 --out /tmp/out/encoder_hlo.txt
 
-Compiles the grad of a scalar loss of ``networks.encode`` wrt the params (the stair layout, the
-default NetworkConfig, ``--batch`` maps) for one conv_impl and writes ``compiled.as_text()``,
-so the kernels a profile names (``loop_convert_fusion`` ...) can be read back to their ops.
+Compiles the grad of encoder_bench's scalar loss of ``networks.encode`` wrt the params (the
+stair layout, the default NetworkConfig, ``--batch`` maps) for one conv_impl and writes
+``compiled.as_text()``, so the kernels a profile names (``loop_convert_fusion`` ...) can be read
+back to their ops.
 """
 
 from __future__ import annotations
@@ -13,11 +14,9 @@ import argparse
 
 import jax
 import jax.numpy as jnp
+from encoder_bench import LAYOUT, default_params, encoder_loss  # this folder, on sys.path
 
-from mjx_stairs import atomic, networks
-from mjx_stairs.networks import NetworkConfig, ObsLayout
-
-LAYOUT = ObsLayout(49, (21, 21))
+from mjx_stairs import atomic
 
 
 def main() -> None:
@@ -26,14 +25,9 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=49152)
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
-    params = networks.init_params(jax.random.PRNGKey(0), NetworkConfig(), LAYOUT.n_vec,
-                                  LAYOUT.map_shape, 12)
     obs = jnp.zeros((args.batch, LAYOUT.obs_size), jnp.float32)
-
-    def loss(p, o):
-        return jnp.sum(jnp.sin(networks.encode(p, o, LAYOUT, conv_impl=args.impl)))
-
-    text = jax.jit(jax.grad(loss)).lower(params, obs).compile().as_text()
+    loss = encoder_loss(args.impl)
+    text = jax.jit(jax.grad(loss)).lower(default_params(), obs).compile().as_text()
     atomic.write_text(args.out, text)
     print(f"wrote {args.out} ({len(text)} chars)")
 

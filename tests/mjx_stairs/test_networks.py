@@ -155,6 +155,28 @@ def test_fused_actor_critic_equals_separate_passes():
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
 
 
+def _encoder_grads(cfg, n_vec, map_shape, n_obs, init_seed, data_seed, bump=None):
+    """Params (random non-zero biases, so their gradients and the padding's interplay are
+    tested) and a jitted ``grad(params, impl) -> (grads, features)`` of a fixed scalar loss of
+    the encoder's features on random maps, or on flat maps of 0.3 with one 1.0 at map index
+    ``bump`` of the first robot (every max-pool window away from it ties)."""
+    layout = ObsLayout(n_vec, map_shape)
+    p = _init(jax.random.PRNGKey(init_seed), cfg, n_vec, map_shape, 2)
+    k = jax.random.split(jax.random.PRNGKey(data_seed), 4)
+    p["encoder"]["conv"] = [{"w": c["w"], "b": 0.3 * jax.random.normal(kk, c["b"].shape)}
+                            for c, kk in zip(p["encoder"]["conv"], k[:3], strict=True)]
+    obs = jax.random.normal(k[3], (n_obs, layout.obs_size))
+    if bump is not None:
+        obs = obs.at[:, n_vec:].set(0.3).at[0, n_vec + bump].set(1.0)
+    weights = jnp.cos(jnp.arange(cfg.latent_size + n_vec, dtype=jnp.float32))
+
+    def loss(params, impl):
+        feat = networks.encode(params, obs, layout, conv_impl=impl)
+        return jnp.sum(jnp.sin(feat) * weights), feat
+
+    return p, jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+
+
 @pytest.mark.parametrize("impl", ["row", "fused"])
 @pytest.mark.parametrize("n_vec,map_shape,flat", [(49, (21, 21), False), (3, (7, 9), False),
                                                   (49, (21, 21), True), (2, (10, 8), False)])
@@ -163,24 +185,9 @@ def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape, flat, impl):
     backward pass) are the same function as lax.conv: features and their gradients wrt every
     encoder param agree. Flat maps (one bump) make the max-pool windows tie: the gradient is
     split between the tied positions as jax's max gradient does."""
-    layout = ObsLayout(n_vec, map_shape)
     cfg = NetworkConfig(conv_channels=(4, 6, 8), latent_size=16, actor_hidden=(8,),
                         critic_hidden=(8,))
-    p = _init(jax.random.PRNGKey(5), cfg, n_vec, map_shape, 2)
-    k = jax.random.split(jax.random.PRNGKey(6), 4)
-    # random (non-zero) biases so their gradients and the padding's interplay are tested
-    p["encoder"]["conv"] = [{"w": c["w"], "b": 0.3 * jax.random.normal(kk, c["b"].shape)}
-                            for c, kk in zip(p["encoder"]["conv"], k[:3], strict=True)]
-    obs = jax.random.normal(k[3], (5, layout.obs_size))
-    if flat:
-        obs = obs.at[:, n_vec:].set(0.3).at[0, n_vec + 30].set(1.0)
-    weights = jnp.cos(jnp.arange(cfg.latent_size + n_vec, dtype=jnp.float32))
-
-    def loss(params, impl):
-        feat = networks.encode(params, obs, layout, conv_impl=impl)
-        return jnp.sum(jnp.sin(feat) * weights), feat
-
-    grad = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+    p, grad = _encoder_grads(cfg, n_vec, map_shape, 5, 5, 6, bump=30 if flat else None)
     (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, impl)
     np.testing.assert_allclose(fb, fa, rtol=1e-5, atol=1e-5)
     assert float(jnp.abs(fa[:, :16]).max()) > 0.0
@@ -209,22 +216,8 @@ def test_fused_bf16_encoder_is_close_to_float32(flat):
     bfloat16 (float32 accumulation): features and every encoder gradient close to, not equal
     to, lax.conv in float32 (relative norm of the difference); its matmuls take bfloat16
     operands."""
-    layout = ObsLayout(3, (21, 21))
     cfg = NetworkConfig(latent_size=16, actor_hidden=(8,), critic_hidden=(8,))
-    p = _init(jax.random.PRNGKey(7), cfg, 3, (21, 21), 2)
-    k = jax.random.split(jax.random.PRNGKey(9), 4)
-    p["encoder"]["conv"] = [{"w": c["w"], "b": 0.3 * jax.random.normal(kk, c["b"].shape)}
-                            for c, kk in zip(p["encoder"]["conv"], k[:3], strict=True)]
-    obs = jax.random.normal(k[3], (6, layout.obs_size))
-    if flat:
-        obs = obs.at[:, 3:].set(0.3).at[0, 40].set(1.0)
-    weights = jnp.cos(jnp.arange(cfg.latent_size + 3, dtype=jnp.float32))
-
-    def loss(params, impl):
-        feat = networks.encode(params, obs, layout, conv_impl=impl)
-        return jnp.sum(jnp.sin(feat) * weights), feat
-
-    grad = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+    p, grad = _encoder_grads(cfg, 3, (21, 21), 6, 7, 9, bump=37 if flat else None)
     (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, "fused_bf16")
     assert fb.dtype == jnp.float32
     err = float(jnp.abs(fb - fa).max() / jnp.abs(fa).max())
