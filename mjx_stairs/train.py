@@ -103,6 +103,13 @@ class TrainConfig:
                   "'per_step': inside the scan, beside each action (same values, smaller "
                   "batches)"},
     )
+    pipeline: str = field(
+        default="sequential",
+        metadata={"help": "'sequential': rollout then PPO update, each iteration in turn; "
+                  "'overlap': each update runs on a second GPU stream while the next "
+                  "rollout runs, acting with the parameters from before that update (one "
+                  "iteration of policy lag, none for the first update of a chunk)"},
+    )
     checkpoint_env: str = field(
         default="full",
         metadata={"help": "'full': the whole batched env state (bit-exact resume); 'packed': "
@@ -369,29 +376,44 @@ def updated_normalizer(norm: dict[str, normalizer.RunningStats], tr: Transition,
     }
 
 
-def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
-    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
+def _rollout_metrics(env_metrics, ep_stats) -> dict[str, jax.Array]:
+    metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
+    metrics.update({f"_ep/{k}": jnp.sum(v) for k, v in ep_stats.items()})
+    return metrics
+
+
+def learn(params, opt_state, norm, tr: Transition, bootstrap: jax.Array, key: jax.Array, *,
+          config, layout: ObsLayout, mesh: Mesh):
+    """GAE -> PPO update -> normaliser update on one rollout; the learner's half of an
+    iteration. Returns (params, opt_state, normaliser, metrics)."""
     pc: PPOConfig = config.ppo
     nc: NetworkConfig = config.network
-    rng, k_roll, k_update = jax.random.split(state.rng, 3)
-    with jax.named_scope("rollout"):  # scopes name the pieces in a profiler trace
-        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
-            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
-        )
     batch, termination = rollout_batch(tr, bootstrap, pc, mesh)
-    with jax.named_scope("ppo_update"):
-        params, opt_state, upd_metrics = ppo.update(
-            state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
+    with jax.named_scope("ppo_update"):  # scopes name the pieces in a profiler trace
+        params, opt_state, metrics = ppo.update(
+            params, opt_state, norm, batch, key, pc, nc, layout,
             constrain=lambda b: _constrain(b, mesh, 1),
         )
-    norm = updated_normalizer(state.normalizer, tr, nc)
-    metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
-    metrics.update(upd_metrics)
     metrics["value/mean"] = jnp.mean(tr.value)
     metrics["value/target_mean"] = jnp.mean(batch.target)
     metrics["episode/terminations"] = jnp.sum(termination)
     metrics["episode/truncations"] = jnp.sum(tr.truncation)
-    metrics.update({f"_ep/{k}": jnp.sum(v) for k, v in ep_stats.items()})
+    return params, opt_state, updated_normalizer(norm, tr, nc), metrics
+
+
+def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
+    rng, k_roll, k_update = jax.random.split(state.rng, 3)
+    with jax.named_scope("rollout"):
+        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
+            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
+        )
+    params, opt_state, norm, upd_metrics = learn(
+        state.params, state.opt_state, state.normalizer, tr, bootstrap, k_update,
+        config=config, layout=layout, mesh=mesh,
+    )
+    metrics = _rollout_metrics(env_metrics, ep_stats)
+    metrics.update(upd_metrics)
     new_state = TrainState(
         params=params, opt_state=opt_state, normalizer=norm, env_state=env_state, rng=rng,
         iteration=state.iteration + 1, ep_return=ep_return, ep_length=ep_length,
@@ -422,8 +444,76 @@ def reduce_chunk_metrics(per_iter: dict[str, jax.Array]) -> dict[str, jax.Array]
 
 def run_chunk(state: TrainState, *, config, env, layout: ObsLayout, mesh: Mesh):
     """K training iterations as one lax.scan; returns (state, chunk metrics)."""
+    if config.train.pipeline == "overlap":
+        return run_chunk_overlap(state, config=config, env=env, layout=layout, mesh=mesh)
     it = functools.partial(training_iteration, config=config, env=env, layout=layout, mesh=mesh)
     state, per_iter = jax.lax.scan(it, state, None, length=config.train.iterations_per_chunk)
+    return state, reduce_chunk_metrics(per_iter)
+
+
+UPDATE_STREAM = "gpu_stream:1"
+
+
+def _on_update_stream(fn: Callable) -> Callable:
+    """``fn`` as a called computation that XLA runs on a second GPU stream (the annotation is
+    ignored on a CPU), so that it overlaps with whatever does not depend on it."""
+    from jax._src import core  # MemorySpace: the output stays in device memory
+    from jax.experimental.compute_on import compute_on2
+
+    return compute_on2(fn, compute_type=UPDATE_STREAM, out_memory_spaces=core.MemorySpace.Device)
+
+
+def run_chunk_overlap(state: TrainState, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """K iterations with each PPO update running beside the next rollout (``pipeline='overlap'``).
+
+    Iteration j's keys are those of the sequential loop (``rng, k_roll, k_update =
+    split(rng, 3)``) and rollout j and update j pair up the same way; what changes is that
+    rollout j + 1 acts with the parameters and normaliser from before update j, so the two are
+    independent and update j runs on a second GPU stream while rollout j + 1 steps the robots.
+    Every update but a chunk's first learns from data one update old (PPO's ratio is taken
+    against the log-probabilities the data were sampled with, as always). With K = 1 this is the
+    sequential loop exactly; checkpoints are unchanged (a chunk ends with no rollout pending).
+    """
+    K = config.train.iterations_per_chunk
+
+    def split(rng, _):
+        rng, k_roll, k_update = jax.random.split(rng, 3)
+        return rng, (k_roll, k_update)
+
+    rng, (k_roll, k_update) = jax.lax.scan(split, state.rng, None, length=K)
+    learner = functools.partial(learn, config=config, layout=layout, mesh=mesh)
+    learner_on_stream = _on_update_stream(learner)
+
+    def act(st: TrainState, key):
+        with jax.named_scope("rollout"):
+            carry, tr, env_metrics, ep_stats, bootstrap = rollout(
+                st, key, config=config, env=env, layout=layout, mesh=mesh)
+        return carry, (tr, bootstrap), _rollout_metrics(env_metrics, ep_stats)
+
+    carry, pending, first = act(state, k_roll[0])
+    state = state._replace(env_state=carry[0], ep_return=carry[1], ep_length=carry[2])
+
+    def step(c, keys):
+        st, (tr, bootstrap) = c
+        key_roll, key_update = keys
+        params, opt_state, norm, upd_metrics = learner_on_stream(
+            st.params, st.opt_state, st.normalizer, tr, bootstrap, key_update)
+        carry, pending, roll_metrics = act(st, key_roll)
+        st = st._replace(params=params, opt_state=opt_state, normalizer=norm,
+                         env_state=carry[0], ep_return=carry[1], ep_length=carry[2])
+        return (st, pending), (roll_metrics, upd_metrics)
+
+    (state, (tr, bootstrap)), (roll_metrics, upd_metrics) = jax.lax.scan(
+        step, (state, pending), (k_roll[1:], k_update[:-1]))
+    params, opt_state, norm, last = learner(
+        state.params, state.opt_state, state.normalizer, tr, bootstrap, k_update[-1])
+
+    per_iter = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]),
+                                      first, roll_metrics)
+    per_iter.update(jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]),
+                                           upd_metrics, last))
+    state = state._replace(params=params, opt_state=opt_state, normalizer=norm, rng=rng,
+                           iteration=state.iteration + K)
     return state, reduce_chunk_metrics(per_iter)
 
 
@@ -454,6 +544,9 @@ def _check(config, mesh: Mesh) -> None:
     if tc.checkpoint_env not in ("full", "packed"):
         raise ValueError(f"train.checkpoint_env must be 'full' or 'packed', not "
                          f"{tc.checkpoint_env!r}")
+    if tc.pipeline not in ("sequential", "overlap"):
+        raise ValueError(f"train.pipeline must be 'sequential' or 'overlap', not "
+                         f"{tc.pipeline!r}")
     if tc.rollout_values not in ("batched", "per_step"):
         raise ValueError(f"train.rollout_values must be 'batched' or 'per_step', not "
                          f"{tc.rollout_values!r}")
@@ -472,7 +565,7 @@ def _compiled_config(config) -> LearnerConfig:
         network=config.network,
         train=TrainConfig(num_envs=tc.num_envs, unroll_length=tc.unroll_length,
                           iterations_per_chunk=tc.iterations_per_chunk,
-                          rollout_values=tc.rollout_values),
+                          rollout_values=tc.rollout_values, pipeline=tc.pipeline),
     )
 
 
