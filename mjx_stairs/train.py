@@ -41,6 +41,7 @@ H100: the resume test fails without it and passes with it).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
@@ -383,16 +384,17 @@ def _rollout_metrics(env_metrics, ep_stats) -> dict[str, jax.Array]:
 
 
 def learn(params, opt_state, norm, tr: Transition, bootstrap: jax.Array, key: jax.Array, *,
-          config, layout: ObsLayout, mesh: Mesh):
+          config, layout: ObsLayout, mesh: Mesh, wrap: Callable | None = None):
     """GAE -> PPO update -> normaliser update on one rollout; the learner's half of an
-    iteration. Returns (params, opt_state, normaliser, metrics)."""
+    iteration. Returns (params, opt_state, normaliser, metrics). ``wrap`` wraps the update's
+    epochs (``ppo.update``)."""
     pc: PPOConfig = config.ppo
     nc: NetworkConfig = config.network
     batch, termination = rollout_batch(tr, bootstrap, pc, mesh)
     with jax.named_scope("ppo_update"):  # scopes name the pieces in a profiler trace
         params, opt_state, metrics = ppo.update(
             params, opt_state, norm, batch, key, pc, nc, layout,
-            constrain=lambda b: _constrain(b, mesh, 1),
+            constrain=lambda b: _constrain(b, mesh, 1), wrap=wrap,
         )
     metrics["value/mean"] = jnp.mean(tr.value)
     metrics["value/target_mean"] = jnp.mean(batch.target)
@@ -456,11 +458,30 @@ UPDATE_STREAM = "gpu_stream:1"
 
 def _on_update_stream(fn: Callable) -> Callable:
     """``fn`` as a called computation that XLA runs on a second GPU stream (the annotation is
-    ignored on a CPU), so that it overlaps with whatever does not depend on it."""
-    from jax._src import core  # MemorySpace: the output stays in device memory
-    from jax.experimental.compute_on import compute_on2
+    ignored on a CPU), so that it overlaps with whatever does not depend on it.
 
-    return compute_on2(fn, compute_type=UPDATE_STREAM, out_memory_spaces=core.MemorySpace.Device)
+    jax's ``compute_on`` traces ``fn`` under its compute type, which annotates every op inside
+    as well as the call; XLA (0.11) then fails on ops inside ``fn``'s while loops ("No
+    ExecutionStreamId found"). So ``fn`` is traced with that context switched off, and only the
+    call carries the annotation.
+    """
+    from jax._src import compute_on as impl
+    from jax._src import core  # MemorySpace: the outputs stay in device memory
+    from jax.experimental import compute_on as co
+
+    # jax 0.10 names the function form compute_on2; jax 0.11 renamed it compute_on
+    wrap = getattr(co, "compute_on2", None) or co.compute_on
+    annotated = wrap(fn, compute_type=UPDATE_STREAM, out_memory_spaces=core.MemorySpace.Device)
+    inner_context = impl.extend_compute_type  # AttributeError here: jax changed its internals
+
+    def on_stream(*args):
+        impl.extend_compute_type = lambda _c: contextlib.nullcontext()
+        try:
+            return annotated(*args)
+        finally:
+            impl.extend_compute_type = inner_context
+
+    return on_stream
 
 
 def run_chunk_overlap(state: TrainState, *, config, env, layout: ObsLayout, mesh: Mesh):
@@ -482,7 +503,9 @@ def run_chunk_overlap(state: TrainState, *, config, env, layout: ObsLayout, mesh
 
     rng, (k_roll, k_update) = jax.lax.scan(split, state.rng, None, length=K)
     learner = functools.partial(learn, config=config, layout=layout, mesh=mesh)
-    learner_on_stream = _on_update_stream(learner)
+    # only the update's epochs (a while loop) go to the second stream: GAE, the normaliser and
+    # the metrics are small and stay on the main one
+    learner_on_stream = functools.partial(learner, wrap=_on_update_stream)
 
     def act(st: TrainState, key):
         with jax.named_scope("rollout"):

@@ -134,6 +134,12 @@ for step in "$@"; do
       XLA_FLAGS=--xla_gpu_enable_command_buffer= python3 experiments/gpu/trace_chunk.py \
         --config experiments/stage2_u_lean.toml --out "$OUT/bench/trace_chunk_nocb.json" 2>&1 \
         | grep -v warp ;;
+    trace-chunk-overlap) mkdir -p "$OUT/bench" "$OUT/hlo"  # train.pipeline=overlap; its HLO too
+      XLA_PYTHON_CLIENT_MEM_FRACTION=0.95 XLA_FLAGS="--xla_dump_to=/tmp/dump_ov \
+        --xla_dump_hlo_module_re=.*run_chunk.*" python3 experiments/gpu/trace_chunk.py \
+        --config experiments/stage2_u_lean.toml --out "$OUT/bench/trace_chunk_overlap.json" \
+        train.pipeline=overlap 2>&1 | grep -v warp
+      gzip -c "$(ls /tmp/dump_ov/*after_optimizations.txt | head -1)" > "$OUT/hlo/overlap.txt.gz" ;;
     bench4096-graphs)  # CUDA graphs for while loops and conditionals too (XLA's default
       # command buffers take fusions and library calls only)
       XLA_FLAGS=--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL \
@@ -164,13 +170,13 @@ for step in "$@"; do
     bench4096-overlap)
       XLA_FLAGS="${XLA_FLAGS:-} --xla_dump_to=/tmp/dump --xla_dump_hlo_module_re=.*run_chunk.*" \
         bench "$OUT/bench/abcr_lean_overlap.json" experiments/stage2_u_lean.toml \
-        train.pipeline=overlap --robots 4096
+        train.pipeline=overlap --robots 4096 --parts ${PARTS:-physics,env,rollout,train}
       f=$(ls /tmp/dump/*after_optimizations.txt 2>/dev/null | head -1)
       [ -n "$f" ] && { echo "HLO $f"; for pat in _xla_stream_annotation operation_queue_id \
         async-start async-done call-start "calls=.*compute_on"; do
         echo "  $pat: $(grep -c -e "$pat" "$f")"; done; grep -m3 -e "_xla_stream_annotation" "$f" | cut -c1-300; }
-      bench "$OUT/bench/c_lean_sequential.json" experiments/stage2_u_lean.toml \
-        --robots 4096 --parts train ;;
+      [ -n "${SEQUENTIAL:-}" ] && bench "$OUT/bench/c_lean_sequential.json" \
+        experiments/stage2_u_lean.toml --robots 4096 --parts train ;;
     # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
     # for the budget of the other lean runs), then evaluated in the reference physics
     # (FUSED_NAME names the run, stage2_u_lean_fused unless set; CONV_IMPL another conv_impl)
