@@ -248,10 +248,8 @@ def sgd_step(
     net_cfg: NetworkConfig,
     layout: ObsLayout,
     constrain: Callable[[Batch], Batch],
-    unroll: bool = False,
 ) -> tuple[tuple[Params, optim.AdamState, jax.Array], dict[str, jax.Array]]:
-    """One epoch: shuffle the flattened batch [N, ...], split into M minibatches, scan them
-    (``unroll``: as straight-line code, no while loop)."""
+    """One epoch: shuffle the flattened batch [N, ...], split into M minibatches, scan them."""
     params, opt_state, rng = carry
     rng, key = jax.random.split(rng)
     shuffled = constrain(shuffle_minibatches(data, key, cfg.num_minibatches))
@@ -259,25 +257,8 @@ def sgd_step(
         minibatch_step, norm=norm, old_log_std=old_log_std, cfg=cfg, net_cfg=net_cfg,
         layout=layout,
     )
-    (params, opt_state), aux = jax.lax.scan(step, (params, opt_state), shuffled, unroll=unroll)
+    (params, opt_state), aux = jax.lax.scan(step, (params, opt_state), shuffled)
     return (params, opt_state, rng), aux
-
-
-def run_epochs(params: Params, opt_state: optim.AdamState,
-               norm: dict[str, normalizer.RunningStats], flat: Batch, rng: jax.Array, *,
-               cfg: PPOConfig, net_cfg: NetworkConfig, layout: ObsLayout,
-               constrain: Callable[[Batch], Batch], unroll: bool = False):
-    """The epochs of one update on the flattened batch [N, ...] -> (params, opt_state, the
-    per-minibatch metrics [E, M]). ``unroll``: every epoch and minibatch as straight-line code
-    (XLA's second-stream calls cannot hold while loops)."""
-    epoch = functools.partial(
-        sgd_step, data=flat, norm=norm, old_log_std=params["log_std"], cfg=cfg,
-        net_cfg=net_cfg, layout=layout, constrain=constrain, unroll=unroll,
-    )
-    (params, opt_state, _), aux = jax.lax.scan(
-        epoch, (params, opt_state, rng), None, length=cfg.num_epochs, unroll=unroll
-    )
-    return params, opt_state, aux
 
 
 def update(
@@ -290,13 +271,10 @@ def update(
     net_cfg: NetworkConfig,
     layout: ObsLayout,
     constrain: Callable[[Batch], Batch] = lambda b: b,
-    wrap: Callable[[Callable], Callable] | None = None,
 ) -> tuple[Params, optim.AdamState, dict[str, jax.Array]]:
     """One PPO training step on a rollout Batch [T, B, ...]: num_epochs x num_minibatches.
 
-    ``constrain`` may pin the sharding of the split minibatches [M, N / M, ...] (data parallel);
-    ``wrap`` may wrap ``run_epochs``, which is then unrolled (the trainer's overlap pipeline
-    puts it on its own stream).
+    ``constrain`` may pin the sharding of the split minibatches [M, N / M, ...] (data parallel).
     Returns new params, optimiser state and the loss metrics averaged over all minibatches
     (``opt/lr`` is the value after the last minibatch).
     """
@@ -306,10 +284,13 @@ def update(
             f"batch of {n} transitions does not split into {cfg.num_minibatches} minibatches"
         )
     flat = jax.tree_util.tree_map(lambda x: x.reshape(n, *x.shape[2:]), data)
-    epochs = functools.partial(run_epochs, cfg=cfg, net_cfg=net_cfg, layout=layout,
-                               constrain=constrain, unroll=wrap is not None)
-    params, opt_state, aux = (epochs if wrap is None else wrap(epochs))(
-        params, opt_state, norm, flat, rng)
+    epoch = functools.partial(
+        sgd_step, data=flat, norm=norm, old_log_std=params["log_std"], cfg=cfg,
+        net_cfg=net_cfg, layout=layout, constrain=constrain,
+    )
+    (params, opt_state, _), aux = jax.lax.scan(
+        epoch, (params, opt_state, rng), None, length=cfg.num_epochs
+    )
     metrics = jax.tree_util.tree_map(jnp.mean, aux)
     metrics["opt/lr"] = opt_state.lr
     return params, opt_state, metrics

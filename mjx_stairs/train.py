@@ -41,7 +41,6 @@ H100: the resume test fails without it and passes with it).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import json
@@ -103,13 +102,6 @@ class TrainConfig:
                   "obs_t), the bootstrap) in one encoder pass after the rollout scan; "
                   "'per_step': inside the scan, beside each action (same values, smaller "
                   "batches)"},
-    )
-    pipeline: str = field(
-        default="sequential",
-        metadata={"help": "'sequential': rollout then PPO update, each iteration in turn; "
-                  "'overlap': each update runs on a second GPU stream while the next "
-                  "rollout runs, acting with the parameters from before that update (one "
-                  "iteration of policy lag, none for the first update of a chunk)"},
     )
     checkpoint_env: str = field(
         default="full",
@@ -377,45 +369,29 @@ def updated_normalizer(norm: dict[str, normalizer.RunningStats], tr: Transition,
     }
 
 
-def _rollout_metrics(env_metrics, ep_stats) -> dict[str, jax.Array]:
-    metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
-    metrics.update({f"_ep/{k}": jnp.sum(v) for k, v in ep_stats.items()})
-    return metrics
-
-
-def learn(params, opt_state, norm, tr: Transition, bootstrap: jax.Array, key: jax.Array, *,
-          config, layout: ObsLayout, mesh: Mesh, wrap: Callable | None = None):
-    """GAE -> PPO update -> normaliser update on one rollout; the learner's half of an
-    iteration. Returns (params, opt_state, normaliser, metrics). ``wrap`` wraps the update's
-    epochs (``ppo.update``)."""
+def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
+    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
     pc: PPOConfig = config.ppo
     nc: NetworkConfig = config.network
-    batch, termination = rollout_batch(tr, bootstrap, pc, mesh)
-    with jax.named_scope("ppo_update"):  # scopes name the pieces in a profiler trace
-        params, opt_state, metrics = ppo.update(
-            params, opt_state, norm, batch, key, pc, nc, layout,
-            constrain=lambda b: _constrain(b, mesh, 1), wrap=wrap,
+    rng, k_roll, k_update = jax.random.split(state.rng, 3)
+    with jax.named_scope("rollout"):  # scopes name the pieces in a profiler trace
+        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
+            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
         )
+    batch, termination = rollout_batch(tr, bootstrap, pc, mesh)
+    with jax.named_scope("ppo_update"):
+        params, opt_state, upd_metrics = ppo.update(
+            state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
+            constrain=lambda b: _constrain(b, mesh, 1),
+        )
+    norm = updated_normalizer(state.normalizer, tr, nc)
+    metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
+    metrics.update(upd_metrics)
     metrics["value/mean"] = jnp.mean(tr.value)
     metrics["value/target_mean"] = jnp.mean(batch.target)
     metrics["episode/terminations"] = jnp.sum(termination)
     metrics["episode/truncations"] = jnp.sum(tr.truncation)
-    return params, opt_state, updated_normalizer(norm, tr, nc), metrics
-
-
-def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, mesh: Mesh):
-    """Rollout (scan of T steps) -> GAE -> PPO update -> normaliser update; one iteration."""
-    rng, k_roll, k_update = jax.random.split(state.rng, 3)
-    with jax.named_scope("rollout"):
-        (env_state, ep_return, ep_length), tr, env_metrics, ep_stats, bootstrap = rollout(
-            state, k_roll, config=config, env=env, layout=layout, mesh=mesh
-        )
-    params, opt_state, norm, upd_metrics = learn(
-        state.params, state.opt_state, state.normalizer, tr, bootstrap, k_update,
-        config=config, layout=layout, mesh=mesh,
-    )
-    metrics = _rollout_metrics(env_metrics, ep_stats)
-    metrics.update(upd_metrics)
+    metrics.update({f"_ep/{k}": jnp.sum(v) for k, v in ep_stats.items()})
     new_state = TrainState(
         params=params, opt_state=opt_state, normalizer=norm, env_state=env_state, rng=rng,
         iteration=state.iteration + 1, ep_return=ep_return, ep_length=ep_length,
@@ -446,97 +422,8 @@ def reduce_chunk_metrics(per_iter: dict[str, jax.Array]) -> dict[str, jax.Array]
 
 def run_chunk(state: TrainState, *, config, env, layout: ObsLayout, mesh: Mesh):
     """K training iterations as one lax.scan; returns (state, chunk metrics)."""
-    if config.train.pipeline == "overlap":
-        return run_chunk_overlap(state, config=config, env=env, layout=layout, mesh=mesh)
     it = functools.partial(training_iteration, config=config, env=env, layout=layout, mesh=mesh)
     state, per_iter = jax.lax.scan(it, state, None, length=config.train.iterations_per_chunk)
-    return state, reduce_chunk_metrics(per_iter)
-
-
-UPDATE_STREAM = "gpu_stream:1"
-
-
-def _on_update_stream(fn: Callable) -> Callable:
-    """``fn`` as a called computation that XLA runs on a second GPU stream (the annotation is
-    ignored on a CPU), so that it overlaps with whatever does not depend on it.
-
-    jax's ``compute_on`` traces ``fn`` under its compute type, which annotates every op inside
-    as well as the call; XLA (0.11) then fails on ops inside ``fn``'s while loops ("No
-    ExecutionStreamId found"). So ``fn`` is traced with that context switched off, and only the
-    call carries the annotation.
-    """
-    from jax._src import compute_on as impl
-    from jax._src import core  # MemorySpace: the outputs stay in device memory
-    from jax.experimental import compute_on as co
-
-    # jax 0.10 names the function form compute_on2; jax 0.11 renamed it compute_on
-    wrap = getattr(co, "compute_on2", None) or co.compute_on
-    annotated = wrap(fn, compute_type=UPDATE_STREAM, out_memory_spaces=core.MemorySpace.Device)
-    inner_context = impl.extend_compute_type  # AttributeError here: jax changed its internals
-
-    def on_stream(*args):
-        impl.extend_compute_type = lambda _c: contextlib.nullcontext()
-        try:
-            return annotated(*args)
-        finally:
-            impl.extend_compute_type = inner_context
-
-    return on_stream
-
-
-def run_chunk_overlap(state: TrainState, *, config, env, layout: ObsLayout, mesh: Mesh):
-    """K iterations with each PPO update running beside the next rollout (``pipeline='overlap'``).
-
-    Iteration j's keys are those of the sequential loop (``rng, k_roll, k_update =
-    split(rng, 3)``) and rollout j and update j pair up the same way; what changes is that
-    rollout j + 1 acts with the parameters and normaliser from before update j, so the two are
-    independent and update j runs on a second GPU stream while rollout j + 1 steps the robots.
-    Every update but a chunk's first learns from data one update old (PPO's ratio is taken
-    against the log-probabilities the data were sampled with, as always). With K = 1 this is the
-    sequential loop exactly; checkpoints are unchanged (a chunk ends with no rollout pending).
-    """
-    K = config.train.iterations_per_chunk
-
-    def split(rng, _):
-        rng, k_roll, k_update = jax.random.split(rng, 3)
-        return rng, (k_roll, k_update)
-
-    rng, (k_roll, k_update) = jax.lax.scan(split, state.rng, None, length=K)
-    learner = functools.partial(learn, config=config, layout=layout, mesh=mesh)
-    # only the update's epochs (a while loop) go to the second stream: GAE, the normaliser and
-    # the metrics are small and stay on the main one
-    learner_on_stream = functools.partial(learner, wrap=_on_update_stream)
-
-    def act(st: TrainState, key):
-        with jax.named_scope("rollout"):
-            carry, tr, env_metrics, ep_stats, bootstrap = rollout(
-                st, key, config=config, env=env, layout=layout, mesh=mesh)
-        return carry, (tr, bootstrap), _rollout_metrics(env_metrics, ep_stats)
-
-    carry, pending, first = act(state, k_roll[0])
-    state = state._replace(env_state=carry[0], ep_return=carry[1], ep_length=carry[2])
-
-    def step(c, keys):
-        st, (tr, bootstrap) = c
-        key_roll, key_update = keys
-        params, opt_state, norm, upd_metrics = learner_on_stream(
-            st.params, st.opt_state, st.normalizer, tr, bootstrap, key_update)
-        carry, pending, roll_metrics = act(st, key_roll)
-        st = st._replace(params=params, opt_state=opt_state, normalizer=norm,
-                         env_state=carry[0], ep_return=carry[1], ep_length=carry[2])
-        return (st, pending), (roll_metrics, upd_metrics)
-
-    (state, (tr, bootstrap)), (roll_metrics, upd_metrics) = jax.lax.scan(
-        step, (state, pending), (k_roll[1:], k_update[:-1]))
-    params, opt_state, norm, last = learner(
-        state.params, state.opt_state, state.normalizer, tr, bootstrap, k_update[-1])
-
-    per_iter = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]),
-                                      first, roll_metrics)
-    per_iter.update(jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]),
-                                           upd_metrics, last))
-    state = state._replace(params=params, opt_state=opt_state, normalizer=norm, rng=rng,
-                           iteration=state.iteration + K)
     return state, reduce_chunk_metrics(per_iter)
 
 
@@ -567,9 +454,6 @@ def _check(config, mesh: Mesh) -> None:
     if tc.checkpoint_env not in ("full", "packed"):
         raise ValueError(f"train.checkpoint_env must be 'full' or 'packed', not "
                          f"{tc.checkpoint_env!r}")
-    if tc.pipeline not in ("sequential", "overlap"):
-        raise ValueError(f"train.pipeline must be 'sequential' or 'overlap', not "
-                         f"{tc.pipeline!r}")
     if tc.rollout_values not in ("batched", "per_step"):
         raise ValueError(f"train.rollout_values must be 'batched' or 'per_step', not "
                          f"{tc.rollout_values!r}")
@@ -588,7 +472,7 @@ def _compiled_config(config) -> LearnerConfig:
         network=config.network,
         train=TrainConfig(num_envs=tc.num_envs, unroll_length=tc.unroll_length,
                           iterations_per_chunk=tc.iterations_per_chunk,
-                          rollout_values=tc.rollout_values, pipeline=tc.pipeline),
+                          rollout_values=tc.rollout_values),
     )
 
 

@@ -9,8 +9,7 @@
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
 # trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
-# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, encoder-hlo, bench4096-overlap,
-# report. Each training step stops and
+# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, encoder-hlo, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -134,12 +133,6 @@ for step in "$@"; do
       XLA_FLAGS=--xla_gpu_enable_command_buffer= python3 experiments/gpu/trace_chunk.py \
         --config experiments/stage2_u_lean.toml --out "$OUT/bench/trace_chunk_nocb.json" 2>&1 \
         | grep -v warp ;;
-    trace-chunk-overlap) mkdir -p "$OUT/bench" "$OUT/hlo"  # train.pipeline=overlap; its HLO too
-      XLA_PYTHON_CLIENT_MEM_FRACTION=0.95 XLA_FLAGS="--xla_dump_to=/tmp/dump_ov \
-        --xla_dump_hlo_module_re=.*run_chunk.*" python3 experiments/gpu/trace_chunk.py \
-        --config experiments/stage2_u_lean.toml --out "$OUT/bench/trace_chunk_overlap.json" \
-        train.pipeline=overlap 2>&1 | grep -v warp
-      gzip -c "$(ls /tmp/dump_ov/*after_optimizations.txt | head -1)" > "$OUT/hlo/overlap.txt.gz" ;;
     bench4096-graphs)  # CUDA graphs for while loops and conditionals too (XLA's default
       # command buffers take fusions and library calls only)
       XLA_FLAGS=--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL \
@@ -164,19 +157,6 @@ for step in "$@"; do
         --batch 49152 --out "$OUT/bench/encoder_bf16.json" 2>&1 | grep -v warp
       bench "$OUT/bench/abcr_lean_fused_bf16.json" experiments/stage2_u_lean.toml \
         network.conv_impl=fused_bf16 --robots 4096 ;;
-    # train.pipeline=overlap (each PPO update on a second GPU stream beside the next rollout):
-    # (a)+(b)+(r)+(c) with it, then (c) sequential in the same lease; the chunk's optimised HLO
-    # is dumped and its async / stream-annotated instructions counted
-    bench4096-overlap)
-      XLA_FLAGS="${XLA_FLAGS:-} --xla_dump_to=/tmp/dump --xla_dump_hlo_module_re=.*run_chunk.*" \
-        bench "$OUT/bench/abcr_lean_overlap.json" experiments/stage2_u_lean.toml \
-        train.pipeline=overlap --robots 4096 --parts ${PARTS:-physics,env,rollout,train}
-      f=$(ls /tmp/dump/*after_optimizations.txt 2>/dev/null | head -1)
-      [ -n "$f" ] && { echo "HLO $f"; for pat in _xla_stream_annotation operation_queue_id \
-        async-start async-done call-start "calls=.*compute_on"; do
-        echo "  $pat: $(grep -c -e "$pat" "$f")"; done; grep -m3 -e "_xla_stream_annotation" "$f" | cut -c1-300; }
-      [ -n "${SEQUENTIAL:-}" ] && bench "$OUT/bench/c_lean_sequential.json" \
-        experiments/stage2_u_lean.toml --robots 4096 --parts train ;;
     # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
     # for the budget of the other lean runs), then evaluated in the reference physics
     # (FUSED_NAME names the run, stage2_u_lean_fused unless set; CONV_IMPL another conv_impl)
