@@ -42,6 +42,11 @@ from mjx_stairs import robot as rb
 N_VEC = 49
 """Length of the vector part of an observation (before the height map)."""
 
+STEP_INPUTS = ("qpos", "qvel", "qacc_warmstart", "ctrl", "time")
+"""The fields of mjx.Data a physics step starts from: MJX recomputes every other field
+(kinematics, contacts, constraint rows) from these (the Go2 model has no actuator activations).
+The NaN guard restores these, and `pack_state` keeps these."""
+
 
 @dataclasses.dataclass(frozen=True)
 class NoiseConfig:
@@ -207,6 +212,9 @@ class StairEnv(Env):
         self.families = tuple(atlas.families)
         self.robot = rb.build(atlas.heights, self.resolution, config.robot)
         self._mx = self.robot.mjx_model
+        if self._mx.na:
+            raise ValueError(f"the robot model has {self._mx.na} actuator activations; the NaN "
+                             "guard and pack_state keep only STEP_INPUTS")
         ids = self.robot.ids
         self._ids = ids
         mj = self.robot.mj_model
@@ -406,11 +414,13 @@ class StairEnv(Env):
             data0 = self._push(data0, info)
         with jax.named_scope("physics"):  # scopes name the pieces in a profiler trace
             data = jax.lax.scan(physics, data0, None, length=c.decimation)[0]
-        torque = data.ctrl
         finite = jnp.all(jnp.isfinite(data.qpos)) & jnp.all(jnp.isfinite(data.qvel))
         with jax.named_scope("nan_guard"):
-            data = jax.tree_util.tree_map(lambda new, old: jnp.where(finite, new, old), data,
-                                          data0)
+            # Only the fields a step starts from (STEP_INPUTS) go back to their values before
+            # the step; the derived ones, recomputed by the next step, stay as they came out.
+            data = data.replace(**{f: jnp.where(finite, getattr(data, f), getattr(data0, f))
+                                   for f in STEP_INPUTS})
+        torque = data.ctrl  # the last substep's torques (before the step's, if it blew up)
 
         # Quantities of the robot after the step.
         qpos, qvel = data.qpos, data.qvel
@@ -557,11 +567,7 @@ class StairEnv(Env):
         d = state.pipeline_state
         info = {k: v for k, v in state.info.items() if k != "final_obs"}
         return {
-            "qpos": d.qpos,
-            "qvel": d.qvel,
-            "qacc_warmstart": d.qacc_warmstart,
-            "ctrl": d.ctrl,
-            "time": d.time,
+            **{f: getattr(d, f) for f in STEP_INPUTS},
             "obs": state.obs["state"],
             "reward": state.reward,
             "done": state.done,
@@ -572,13 +578,7 @@ class StairEnv(Env):
     def unpack_state(self, packed: dict[str, Any]) -> State:
         """A State from `pack_state`'s output; stepping it matches stepping the original up to
         float rounding of the recomputed critic observation."""
-        data = mjx.make_data(self._mx).replace(
-            qpos=packed["qpos"],
-            qvel=packed["qvel"],
-            qacc_warmstart=packed["qacc_warmstart"],
-            ctrl=packed["ctrl"],
-            time=packed["time"],
-        )
+        data = mjx.make_data(self._mx).replace(**{f: packed[f] for f in STEP_INPUTS})
         info = dict(packed["info"])
         clean = self._observe(data.qpos, data.qvel, info, None)["privileged_state"]
         obs = {"state": packed["obs"], "privileged_state": clean}

@@ -9,7 +9,8 @@
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
 # trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
-# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, encoder-hlo, report. Each training step stops and
+# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, encoder-hlo, bench-lean,
+# report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -157,6 +158,9 @@ for step in "$@"; do
         --batch 49152 --out "$OUT/bench/encoder_bf16.json" 2>&1 | grep -v warp
       bench "$OUT/bench/abcr_lean_fused_bf16.json" experiments/stage2_u_lean.toml \
         network.conv_impl=fused_bf16 --robots 4096 ;;
+    # (a)+(b)+(r)+(c) of stage2_u_lean.toml as it stands, at 4096 and 16 384 robots
+    bench-lean) bench "$OUT/bench/abcr_lean.json" experiments/stage2_u_lean.toml \
+        --robots 4096 16384 ;;
     # stage 2 with the lean settings and conv_impl=fused (TRAIN_ARGS=train.total_iterations=290
     # for the budget of the other lean runs), then evaluated in the reference physics
     # (FUSED_NAME names the run, stage2_u_lean_fused unless set; CONV_IMPL another conv_impl)

@@ -77,6 +77,33 @@ def test_reset_and_step_100_steps(env, fns):
     assert state.pipeline_state.qpos.shape == (B, 19)
 
 
+def test_a_robot_whose_physics_blows_up_is_reset_and_the_others_step_on(env, fns):
+    """The NaN guard: a robot whose step ends non-finite (here a joint speed of 1e20 rad/s)
+    terminates with reward 0 and comes back reset; every other robot's step is the one it takes
+    without the bad robot beside it; and the next step of all of them is finite throughout."""
+    state = _reset(env, fns, [0] * B)
+    ps = state.pipeline_state
+    bad = state.replace(pipeline_state=ps.replace(qvel=ps.qvel.at[0, 6:].set(1e20)))
+    action = jnp.zeros((B, env.action_size))
+    clean, hit = fns["step"](state, action), fns["step"](bad, action)
+    assert float(hit.metrics["nan_reset"][0]) == 1.0 and float(hit.done[0]) == 1.0
+    assert float(hit.reward[0]) == 0.0
+    assert not np.any(np.asarray(clean.metrics["nan_reset"]))
+    for a, b in ((hit.pipeline_state.qpos, clean.pipeline_state.qpos), (hit.reward, clean.reward),
+                 (hit.obs["state"], clean.obs["state"])):
+        np.testing.assert_array_equal(np.asarray(a)[1:], np.asarray(b)[1:])
+    fresh = np.asarray(hit.pipeline_state.qpos[0])
+    assert np.all(np.isfinite(fresh)) and np.allclose(fresh[7:], env._nominal, atol=0.2)
+    assert np.all(np.isfinite(np.asarray(hit.pipeline_state.ctrl)))
+    for obs in (hit.obs, hit.info["final_obs"]):  # the final obs feeds the value bootstrap
+        assert all(np.all(np.isfinite(np.asarray(v))) for v in obs.values())
+    after = fns["step"](hit, action)
+    for leaf in (after.pipeline_state.qpos, after.pipeline_state.qvel, after.pipeline_state.xpos,
+                 after.reward, *after.obs.values(), *after.metrics.values()):
+        assert np.all(np.isfinite(np.asarray(leaf)))
+    assert not np.any(np.asarray(after.metrics["nan_reset"]))
+
+
 def test_height_map_matches_numpy_reference(env, atlas):
     rng = np.random.default_rng(0)
     t = atlas.cols * 1  # the stair tile (level 7)
