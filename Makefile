@@ -35,7 +35,7 @@ train-stage1: $(SETUP)
 train-stage2: $(SETUP)
 	$(PY) -m mjx_stairs train experiments/stage2_u.toml $(ARGS)
 
-train-stage2-fast: $(SETUP)  # lean settings (issue 7): 406 k vs 170 k env steps/s on an H100, same stage-2 success
+train-stage2-fast: $(SETUP)  # lean settings (issue 7): 417 k vs 187 k env steps/s on an H100 (stage-2 success: experiments/README.md)
 	$(PY) -m mjx_stairs train experiments/stage2_u_lean.toml $(ARGS)
 
 ablation: $(SETUP)

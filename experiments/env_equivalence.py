@@ -1,0 +1,88 @@
+"""Step the env of this tree and the env of another git revision side by side and compare.
+
+    JAX_PLATFORMS=cpu python experiments/env_equivalence.py REV [--steps 120] [--robots 16]
+
+Both envs are built on the same small pyramid atlas (levels 1 and 7), reset the same robots and
+step them with the same random actions for ``--steps`` policy steps (2 s episodes, so every robot
+ends an episode and is reset on the way). Prints, for qpos, reward, done and the critic's
+observation, whether the two trajectories are bit for bit the same and their largest difference;
+exits 1 if any differs. Used for changes meant to leave the env's numbers alone (NOTES.md,
+Change 10: the NaN guard).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import terrains  # noqa: E402
+from mjx_stairs import env as env_now  # noqa: E402
+
+
+def env_module_at(rev: str):
+    """mjx_stairs/env.py as of git revision ``rev``, imported as a module of its own."""
+    shown = subprocess.run(["git", "show", f"{rev}:mjx_stairs/env.py"], cwd=ROOT,
+                           capture_output=True, text=True)
+    if shown.returncode:
+        raise SystemExit(f"no mjx_stairs/env.py at git revision {rev!r}: "
+                         f"{shown.stderr.strip().splitlines()[-1]}")
+    src = shown.stdout
+    path = Path(tempfile.mkdtemp()) / "env_at_rev.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location("env_at_rev", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def trajectory(module, atlas, robots: int, steps: int) -> dict[str, np.ndarray]:
+    env = module.StairEnv(atlas, module.EnvConfig(episode_length_s=2.0))
+    reset, step = jax.jit(jax.vmap(env.reset_at)), jax.jit(jax.vmap(env.step))
+    rows = jnp.asarray([0, 1] * (robots // 2) + [0] * (robots % 2), jnp.int32)
+    state = reset(jax.random.split(jax.random.PRNGKey(0), robots), rows,
+                  jnp.zeros(robots, jnp.int32))
+    key, out = jax.random.PRNGKey(1), {"qpos": [], "reward": [], "done": [], "critic_obs": []}
+    for _ in range(steps):
+        key, k = jax.random.split(key)
+        state = step(state, jax.random.normal(k, (robots, env.action_size)))
+        out["qpos"].append(np.asarray(state.pipeline_state.qpos))
+        out["reward"].append(np.asarray(state.reward))
+        out["done"].append(np.asarray(state.done))
+        out["critic_obs"].append(np.asarray(state.obs["privileged_state"]))
+    return {k: np.stack(v) for k, v in out.items()}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("rev", help="git revision whose mjx_stairs/env.py to compare with")
+    ap.add_argument("--steps", type=int, default=120)
+    ap.add_argument("--robots", type=int, default=16)
+    args = ap.parse_args()
+    atlas = terrains.build_atlas(["pyramid"], "train", levels=[0, 6], variants_per_family=1,
+                                 resolution=0.05, tile_size=10.0, border=1.0)
+    now = trajectory(env_now, atlas, args.robots, args.steps)
+    then = trajectory(env_module_at(args.rev), atlas, args.robots, args.steps)
+    print(f"{args.robots} robots x {args.steps} steps, {int(now['done'].sum())} episode ends")
+    same = True
+    for k in now:
+        equal = np.array_equal(now[k], then[k])
+        same &= equal
+        print(f"  {k:10s} {'identical' if equal else 'DIFFERENT'}  max |diff| "
+              f"{np.abs(now[k] - then[k]).max():.3g}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
