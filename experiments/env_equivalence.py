@@ -23,11 +23,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import terrains
+from mjx_stairs import env as env_now
 
-import terrains  # noqa: E402
-from mjx_stairs import env as env_now  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def env_module_at(rev: str):

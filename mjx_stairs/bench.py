@@ -127,6 +127,9 @@ def bench_rollout(config: ExperimentConfig, env, repeats: int) -> dict[str, floa
     return {"compile_s": compile_s, "steps_per_s": steps / run_s}
 
 
+PARTS = ("physics", "env", "rollout", "train")  # (a), (b), (r), (c)
+
+
 def _split(row: dict[str, Any], steps_per_iteration: int) -> dict[str, float]:
     """Seconds of one training iteration spent in each layer, from the rates of one run."""
     sec = {k: steps_per_iteration / row[k]["steps_per_s"] for k in PARTS if k in row}
@@ -137,9 +140,6 @@ def _split(row: dict[str, Any], steps_per_iteration: int) -> dict[str, float]:
         if top in sec and (below is None or below in sec):
             out[name] = sec[top] - (sec[below] if below else 0.0)
     return out
-
-
-PARTS = ("physics", "env", "rollout", "train")  # (a), (b), (r), (c)
 
 
 def _memory() -> dict[str, float]:

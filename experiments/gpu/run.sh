@@ -9,8 +9,8 @@
 # stage2-lean-s1, bench4096-nearest, bench16384-lean, straight-lean, l-shaped-lean, spiral-lean,
 # transfer-lean, bench4096-values, bench4096-update-bound, update-profile,
 # trace-chunk, trace-chunk-nocb, bench4096-graphs, bench4096-fused,
-# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16, eval-committed, encoder-hlo, bench-lean,
-# report. Each training step stops and
+# bench4096-fused-abcr, stage2-lean-fused, bench4096-no-triton-gemm, bench4096-bf16,
+# eval-committed, encoder-hlo, bench-lean, report. Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import dataclasses
 import types
 
 import jax
@@ -214,8 +215,6 @@ def test_mcap_rewards_contacts_height_map(played, log):
 
 def test_mcap_path_restarts_with_each_episode(played, tmp_path):
     """After an auto-reset (episode step 0) the path holds only the new episode's poses."""
-    import dataclasses
-
     r = dataclasses.replace(played.rollout, step=played.rollout.step.copy())
     r.step[20:, 0] = np.arange(FRAMES - 20)  # robot 0: a new episode starts at frame 20
     mcap_log.write_mcap(tmp_path / "r.mcap", played.env, r)
@@ -305,8 +304,6 @@ def test_a_policy_trained_with_a_bf16_encoder_loads_in_float32(policy_file, tmp_
     """conv_impl 'fused_bf16' is a training setting: the loaded policy computes in float32
     (the same actions as the policy saved with the default conv_impl), and its metadata still
     says what it trained with."""
-    import dataclasses
-
     cfg = ExperimentConfig()
     cfg = dataclasses.replace(cfg, network=dataclasses.replace(cfg.network,
                                                                conv_impl="fused_bf16"))
