@@ -237,6 +237,12 @@ class StairEnv(Env):
         self._line_cum = jnp.asarray(cumulative, jnp.float32)  # [n, K]
         self._line_len = jnp.asarray(cumulative[:, -1], jnp.float32)  # [n]
         self.tile_origin = np.asarray(atlas.origin, np.float32)  # [n, 2] host copy
+        # The height map reads only the robot's own tile: [n, 2] the world xy of its first and
+        # last grid point. What lies past a tile's edge in an atlas (a neighbour's floor behind
+        # a thin wall, a border) is no part of that staircase.
+        extent = (int(round(atlas.tile_size / self.resolution)) - 1) * self.resolution
+        self._tile_lo = jnp.asarray(self.tile_origin)
+        self._tile_hi = jnp.asarray(self.tile_origin + np.float32(extent))
         self._tile_level = jnp.asarray(atlas.level, jnp.int32)
         self._tile_family = jnp.asarray(atlas.family, jnp.int32)
         self._table = cur.TileTable(np.asarray(atlas.family), int(atlas.cols), len(self.families))
@@ -295,6 +301,15 @@ class StairEnv(Env):
     def reward_terms(self) -> tuple[str, ...]:
         return self._terms
 
+    @property
+    def goals(self) -> jnp.ndarray:
+        """[n_tiles, 4] each tile's goal (x, y, z, yaw), world frame."""
+        return self._goal
+
+    def observe(self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict) -> jnp.ndarray:
+        """The clean actor observation [49 + size**2] of one robot (evaluation settings)."""
+        return self._observe(qpos, qvel, info, None)["state"]
+
     # ------------------------------------------------------------------ terrain
 
     def terrain_height(self, x: jnp.ndarray, y: jnp.ndarray) -> jnp.ndarray:
@@ -304,12 +319,15 @@ class StairEnv(Env):
             data, self.atlas_shape, self.resolution, x, y
         )
 
-    def height_map(self, pos: jnp.ndarray, yaw: jnp.ndarray) -> jnp.ndarray:
-        """[size * size] map values (base z - terrain z - offset, clipped) around `pos` [3]."""
+    def height_map(self, pos: jnp.ndarray, yaw: jnp.ndarray, tile: jnp.ndarray) -> jnp.ndarray:
+        """[size * size] map values (base z - terrain z - offset, clipped) around `pos` [3],
+        read on `tile` alone: points past its edge read the edge (its outer wall or floor)."""
         hm = self.config.height_map
         c, s = jnp.cos(yaw), jnp.sin(yaw)
         px = pos[0] + c * self._map_xy[:, 0] - s * self._map_xy[:, 1]
         py = pos[1] + s * self._map_xy[:, 0] + c * self._map_xy[:, 1]
+        lo, hi = self._tile_lo[tile], self._tile_hi[tile]
+        px, py = jnp.clip(px, lo[0], hi[0]), jnp.clip(py, lo[1], hi[1])
         h = self.terrain_height(px, py)
         return jnp.clip(pos[2] - h - hm.offset, -hm.clip, hm.clip)
 
@@ -658,7 +676,7 @@ class StairEnv(Env):
             "joint_vel": qvel[self._ids.qvel_joints],
             "last_action": info["last_action"],
             "goal": jnp.concatenate([rot.T @ (goal[:3] - pos), wrap_angle(goal[3] - yaw)[None]]),
-            "height": self.height_map(pos, yaw),
+            "height": self.height_map(pos, yaw, info["tile"]),
         }
         clean = jnp.concatenate(list(parts.values()))
         n = self.config.noise
