@@ -146,10 +146,10 @@ class Batch:
 
 
 def contact_summary(model: mujoco.MjModel, data: mujoco.MjData) -> dict[str, float]:
-    """Terrain contact of one robot now: total normal force (N) and the number of contacts."""
+    """Terrain contact of one robot now: |net vertical force| (N) and the number of contacts."""
     f6 = np.zeros(6)
-    normal = 0.0
+    net = np.zeros(3)
     for i in range(data.ncon):
         mujoco.mj_contactForce(model, data, i, f6)
-        normal += f6[0]
-    return {"normal_force": normal, "ncon": float(data.ncon)}
+        net += data.contact.frame[i].reshape(3, 3).T @ f6[:3]
+    return {"vertical_force": abs(net[2]), "ncon": float(data.ncon)}

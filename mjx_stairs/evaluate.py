@@ -9,6 +9,7 @@ fall still ends the episode and fails). Every robot runs exactly one episode.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import time
@@ -118,6 +119,107 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
         "device": jax.devices()[0].device_kind,
         **({"env_overrides": list(spec.env_overrides)} if spec.env_overrides else {}),
     }
+
+
+# ----------------------------------------------------------------------------- cells
+
+
+Cell = tuple[str, str, int]
+"""(family, schedule, 0-based level): one staircase of the evaluation."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CellSpec:
+    """Policies on any list of cells, all under one compiled program."""
+
+    cells: tuple[Cell, ...] = (("u_shaped", "test", 3),)
+    robots_per_cell: int = 1000
+    episode_length_s: float = 20.0
+    seed: int = 0
+    resolution: float = 0.025
+    tile_size: float = 10.0
+    env_overrides: tuple[str, ...] = ()  # see EvalSpec
+
+
+def schedule_cells(family: str, schedule: str, levels: Sequence[int] = ()) -> tuple[Cell, ...]:
+    """The cells of `family`'s `schedule` (0-based `levels`; () = all)."""
+    import terrains
+
+    chosen = list(levels) or range(len(terrains.levels(family, schedule)))
+    return tuple((family, schedule, int(lv)) for lv in chosen)
+
+
+def cell_env(policy: Policy, spec: CellSpec) -> envlib.StairEnv:
+    """The evaluation env of `policy` (its env config with the spec's overrides) over an atlas
+    with one row per cell, two variants each."""
+    import terrains
+
+    atlas = terrains.build_cell_atlas(spec.cells, 2, spec.resolution, spec.tile_size)
+    cfg = envlib.evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
+    return envlib.StairEnv(atlas, cfg)
+
+
+def initial_states(env: envlib.StairEnv, spec: CellSpec):
+    """[cells * robots_per_cell] robots on their cells' spawns (row-major by cell)."""
+    B = len(spec.cells) * spec.robots_per_cell
+    row = jnp.repeat(jnp.arange(len(spec.cells), dtype=jnp.int32), spec.robots_per_cell)
+    keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
+    return jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
+
+
+def cell_records(spec: CellSpec, success: np.ndarray, fell: np.ndarray, **extra) -> dict:
+    """Per-cell success and falls of [cells * robots] outcomes, as a JSON-ready dict."""
+    shape = (len(spec.cells), spec.robots_per_cell)
+    return {
+        "cells": [{"family": f, "schedule": s, "level": lv + 1} for f, s, lv in spec.cells],
+        "success": [float(v) for v in np.asarray(success).reshape(shape).mean(1)],
+        "fell": [float(v) for v in np.asarray(fell).reshape(shape).mean(1)],
+        "robots_per_cell": spec.robots_per_cell,
+        "episode_length_s": spec.episode_length_s,
+        "seed": spec.seed,
+        "env_overrides": list(spec.env_overrides),
+        **extra,
+    }
+
+
+def success_by_cell(policies: dict[str, Policy], spec: CellSpec) -> dict[str, dict[str, Any]]:
+    """Every policy on every cell of `spec`, MJX, one episode per robot, one compiled program
+    for all policies (their env configs with the overrides must agree)."""
+    first = next(iter(policies.values()))
+    env = cell_env(first, spec)
+    for name, p in policies.items():
+        if env_config_of(p, spec.env_overrides) != env_config_of(first, spec.env_overrides):
+            raise ValueError(f"policy {name!r} needs another env than {next(iter(policies))!r}")
+    state = initial_states(env, spec)
+
+    def run(st, params, norm, like):
+        policy = like._replace(params=params, normalizer=norm)
+
+        def body(carry, _):
+            st, finished, succeeded, fell = carry
+            st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
+            first_done = (st.done > 0) & ~finished
+            succeeded = succeeded | (first_done & (st.metrics["episode_success"] > 0))
+            fell = fell | (first_done & (st.metrics["terminated"] > 0))
+            return (st, finished | (st.done > 0), succeeded, fell), None
+
+        zeros = jnp.zeros(st.done.shape, bool)
+        return jax.lax.scan(body, (st, zeros, zeros, zeros), None, env.episode_steps)[0][1:]
+
+    compiled: dict[Any, Any] = {}  # one program per (network, observation layout)
+    out = {}
+    for name, p in policies.items():
+        key = (p.network, p.layout, p.action_size)
+        if key not in compiled:
+            fn = jax.jit(functools.partial(run, like=p))
+            compiled[key] = fn.lower(state, p.params, p.normalizer).compile()
+        t0 = time.time()
+        finished, succeeded, fell = jax.device_get(compiled[key](state, p.params, p.normalizer))
+        if not finished.all():
+            raise RuntimeError("evaluation ended with robots still in their first episode")
+        out[name] = cell_records(spec, succeeded, fell, physics="mjx", wall_s=time.time() - t0,
+                                 device=jax.devices()[0].device_kind)
+    return out
 
 
 def evaluate(

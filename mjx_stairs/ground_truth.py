@@ -5,7 +5,7 @@ Two measurements, both from the same starting states as an MJX evaluation with t
   evaluation protocol of `evaluate.success_by_level` (same spawns, observation, success and fall
   rules), one episode per robot;
 - `first_second`: from states on the stairs, the same actions replayed open-loop for one second in
-  the ground truth and in each MJX physics option: base position error and contact normal force.
+  the ground truth and in each MJX physics option: base position error, net vertical contact force.
 
 What the ground truth shares with the env is the bookkeeping, not the physics: the observation
 (height map sampled from the atlas grid, so the policy perceives the same staircase), the goal,
@@ -27,7 +27,7 @@ from mujoco.mjx._src import support
 from mjx_stairs import box_world as bw
 from mjx_stairs import env as envlib
 from mjx_stairs import robot as rb
-from mjx_stairs.evaluate import EvalSpec, make_eval_env
+from mjx_stairs.evaluate import CellSpec, cell_env, cell_records, initial_states
 from mjx_stairs.train import Policy, policy_action
 from terrains.boxes import grid_boxes
 
@@ -98,22 +98,19 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
 
 
 def success_in_ground_truth(
-    policy: Policy, spec: EvalSpec, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
+    policy: Policy, spec: CellSpec, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
     nthread: int | None = None,
 ) -> dict[str, Any]:
-    """`evaluate.success_by_level` with CPU MuJoCo on box stairs in place of MJX.
+    """`evaluate.success_by_cell` with CPU MuJoCo on box stairs in place of MJX.
 
-    Robots start from the same states as the MJX evaluation with the same spec (same seed). A
+    Robots start from the same states as the MJX evaluation of the same spec (same seed). A
     robot stops once it has succeeded or fallen (success is final in both).
     """
-    env, levels = make_eval_env(policy, spec)
-    n_levels, per = len(levels), spec.robots_per_level
-    B = n_levels * per
-    row = jnp.repeat(jnp.arange(n_levels, dtype=jnp.int32), per)
-    keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
-    state = jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
+    env = cell_env(policy, spec)
+    state = initial_states(env, spec)
     info = {k: v for k, v in state.info.items() if k != "final_obs"}
     tiles = np.asarray(info["tile"])
+    B = tiles.shape[0]
     models = {int(t): tile_model(env, int(t), spec.tile_size, solver) for t in np.unique(tiles)}
     batch = bw.Batch([models[int(t)] for t in tiles], np.asarray(state.pipeline_state.qpos),
                      nthread=nthread)
@@ -129,131 +126,121 @@ def success_in_ground_truth(
         if not active.any():
             break
         info["last_action"] = jnp.asarray(last_action)
-        a = np.clip(np.asarray(act(observe(jnp.asarray(batch.qpos, jnp.float32),
-                                            jnp.asarray(batch.qvel, jnp.float32), info))),
-                    -c.action_clip, c.action_clip)
+        obs = observe(jnp.asarray(batch.qpos, jnp.float32), jnp.asarray(batch.qvel, jnp.float32),
+                      info)
+        a = np.clip(np.asarray(act(obs)), -c.action_clip, c.action_clip)
         batch.step(rb.NOMINAL_JOINT_POS + c.robot.action_scale * a, c.decimation, active)
         last_action = np.where(active[:, None], a, last_action)
         close, fell = _endings(env, batch.qpos, batch.qvel, goal)
-        ep.count = np.where(close & active, ep.count + 1, np.where(active, 0, ep.count))
+        ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)
         done_now = active & (ep.count >= ep.hold_steps)
         ep.time_to_goal[done_now] = (k + 1) * env.dt
         ep.success |= done_now
         ep.fell |= active & ~done_now & fell
     batch.close()
-    wall = time.time() - t0
-    shape = (n_levels, per)
-    return {
-        "physics": "ground_truth",
-        "family": spec.family,
-        "schedule": spec.schedule,
-        "levels": [lv + 1 for lv in levels],
-        "success": [float(s) for s in ep.success.reshape(shape).mean(1)],
-        "fell": [float(f) for f in ep.fell.reshape(shape).mean(1)],
-        "mean_time_to_goal_s": [float(np.nanmean(t)) if np.isfinite(t).any() else None
-                                for t in ep.time_to_goal.reshape(shape)],
-        "robots_per_level": per,
-        "episode_length_s": spec.episode_length_s,
-        "seed": spec.seed,
-        "solver": dataclasses.asdict(solver),
-        "wall_s": wall,
-    }
+    per_cell = ep.time_to_goal.reshape(len(spec.cells), -1)
+    return cell_records(
+        spec, ep.success, ep.fell, physics="ground_truth", solver=dataclasses.asdict(solver),
+        wall_s=time.time() - t0,
+        mean_time_to_goal_s=[float(np.nanmean(t)) if np.isfinite(t).any() else None
+                             for t in per_cell],
+    )
 
 
 # ----------------------------------------------------------------------------- first second
 
 
-def _mjx_normal_force(env: envlib.StairEnv, data) -> jax.Array:
-    """Total contact normal force (N) on one robot from its MJX data."""
+def _mjx_vertical_force(env: envlib.StairEnv, data) -> jax.Array:
+    """|Net vertical contact force| (N) on one robot from its MJX data."""
     ncon = data._impl.contact.dist.shape[0]
     if ncon == 0:
         return jnp.zeros(())
-    f = jax.vmap(lambda i: support.contact_force(env.robot.mjx_model, data, i)[0])(
-        jnp.arange(ncon))
-    return jnp.sum(jnp.where(data._impl.contact.dist < 0, f, 0.0))
+    m = env.robot.mjx_model  # contact ids are static: efc addresses are host arrays in MJX
+    f = jnp.stack([support.contact_force(m, data, i, True)[2] for i in range(ncon)])
+    return jnp.abs(jnp.sum(jnp.where(data._impl.contact.dist < 0, f, 0.0)))
 
 
 def first_second(
-    policy: Policy, spec: EvalSpec, options: dict[str, Sequence[str]], warmup_s: float = 2.0,
+    policy: Policy, spec: CellSpec, options: dict[str, Sequence[str]], warmup_s: float = 2.0,
     horizon_s: float = 1.0, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
 ) -> dict[str, Any]:
     """From the same states on the stairs, the same actions for `horizon_s` in the ground truth
     and in each MJX option ({name: env overrides}): base position error and contact force.
 
-    The starting states: the robots of `spec` (its first level) after `warmup_s` of the policy
-    in the ground truth. The actions: the policy's, closed-loop in the ground truth; each MJX
-    option replays them open-loop. Returns per option the mean and 90th percentile over robots
-    of the base position error at each policy step and the mean |normal force difference|.
+    The starting states: the spec's robots after `warmup_s` of the policy in the ground truth.
+    The actions: the policy's, closed-loop in the ground truth; each MJX option replays them
+    open-loop. Per option: the mean and 90th percentile over robots of the base position error
+    at each policy step, and the mean |difference| of the total net vertical contact force.
     """
-    spec = dataclasses.replace(spec, levels=spec.levels[:1] or (0,))
-    env, _ = make_eval_env(policy, spec)
-    B = spec.robots_per_level
-    keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
-    state = jax.jit(jax.vmap(env.reset_at))(keys, jnp.zeros(B, jnp.int32), jnp.zeros(B, jnp.int32))
+    env = cell_env(policy, spec)
+    state = initial_states(env, spec)
     info = {k: v for k, v in state.info.items() if k != "final_obs"}
     tiles = np.asarray(info["tile"])
     models = {int(t): tile_model(env, int(t), spec.tile_size, solver) for t in np.unique(tiles)}
-    datas = [mujoco.MjData(models[int(t)]) for t in tiles]
-    for d, q in zip(datas, np.asarray(state.pipeline_state.qpos), strict=True):
+    robots = [(models[int(t)], mujoco.MjData(models[int(t)])) for t in tiles]
+    for (_, d), q in zip(robots, np.asarray(state.pipeline_state.qpos), strict=True):
         d.qpos[:] = q
     observe = jax.jit(jax.vmap(env.observe))
     act = jax.jit(lambda o: policy_action(policy, o))
     c = env.config
     warm, steps = int(round(warmup_s / env.dt)), int(round(horizon_s / env.dt))
-    qpos0 = qvel0 = None
+    start = None
     actions, gt_pos, gt_force = [], [], []
-    last_action = np.zeros((B, 12), np.float32)
+    last_action = np.zeros((len(robots), 12), np.float32)
     for k in range(warm + steps):
+        qpos = np.stack([d.qpos.copy() for _, d in robots])
+        qvel = np.stack([d.qvel.copy() for _, d in robots])
         if k == warm:
-            qpos0 = np.stack([d.qpos.copy() for d in datas])
-            qvel0 = np.stack([d.qvel.copy() for d in datas])
-            last0 = last_action.copy()
+            start = (qpos, qvel, last_action.copy())
         info["last_action"] = jnp.asarray(last_action)
-        qpos = jnp.asarray(np.stack([d.qpos for d in datas]), jnp.float32)
-        qvel = jnp.asarray(np.stack([d.qvel for d in datas]), jnp.float32)
-        a = np.clip(np.asarray(act(observe(qpos, qvel, info))), -c.action_clip, c.action_clip)
+        obs = observe(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32), info)
+        a = np.clip(np.asarray(act(obs)), -c.action_clip, c.action_clip)
         target = rb.NOMINAL_JOINT_POS + c.robot.action_scale * a
-        for i, d in enumerate(datas):
-            d.ctrl[:] = target[i]
+        for (m, d), q_target in zip(robots, target, strict=True):
+            d.ctrl[:] = q_target
             for _ in range(c.decimation):
-                mujoco.mj_step(models[int(tiles[i])], d)
+                mujoco.mj_step(m, d)
         last_action = a
         if k >= warm:
             actions.append(a)
-            gt_pos.append(np.stack([d.qpos[:3].copy() for d in datas]))
-            gt_force.append([bw.contact_summary(models[int(tiles[i])], d)["normal_force"]
-                             for i, d in enumerate(datas)])
+            gt_pos.append(np.stack([d.qpos[:3].copy() for _, d in robots]))
+            gt_force.append([bw.contact_summary(m, d)["vertical_force"] for m, d in robots])
     gt_pos, gt_force = np.array(gt_pos), np.array(gt_force)  # [T, B, 3], [T, B]
-    out = {"robots": B, "warmup_s": warmup_s, "horizon_s": horizon_s, "options": {},
-           "family": spec.family, "schedule": spec.schedule, "level": spec.levels[0] + 1,
-           "gt_mean_normal_force": float(gt_force.mean())}
+    cell = spec.cells[0]
+    out = {"robots": len(robots), "warmup_s": warmup_s, "horizon_s": horizon_s,
+           "cell": {"family": cell[0], "schedule": cell[1], "level": cell[2] + 1},
+           "gt_mean_vertical_force_n": float(gt_force.mean()), "options": {}}
     for name, overrides in options.items():
-        pos, force = replay_in_mjx(policy, spec, overrides, qpos0, qvel0, last0, actions, state)
+        pos, force = replay_in_mjx(policy, dataclasses.replace(spec, env_overrides=tuple(
+            overrides)), start, actions)
         err = np.linalg.norm(pos - gt_pos, axis=-1)  # [T, B]
         out["options"][name] = {
             "overrides": list(overrides),
             "pos_error_mean_m": [float(e) for e in err.mean(1)],
             "pos_error_p90_m": [float(e) for e in np.percentile(err, 90, axis=1)],
             "pos_error_at_horizon_mean_m": float(err[-1].mean()),
+            "pos_error_at_horizon_p90_m": float(np.percentile(err[-1], 90)),
             "force_abs_diff_mean_n": float(np.abs(force - gt_force).mean()),
-            "mean_normal_force_n": float(force.mean()),
+            "mean_vertical_force_n": float(force.mean()),
         }
     return out
 
 
-def replay_in_mjx(policy, spec, overrides, qpos0, qvel0, last0, actions, state0):
-    """Positions [T, B, 3] and contact normal forces [T, B] of MJX option `overrides` replaying
-    `actions` [T][B, 12] from (qpos0, qvel0) on the same tiles as `state0`."""
-    env, _ = make_eval_env(policy, dataclasses.replace(spec, env_overrides=tuple(overrides)))
-    data = state0.pipeline_state.replace(qpos=jnp.asarray(qpos0, jnp.float32),
-                                         qvel=jnp.asarray(qvel0, jnp.float32))
-    info = dict(state0.info, last_action=jnp.asarray(last0))
-    st = state0.replace(pipeline_state=data, info=info)
+def replay_in_mjx(policy: Policy, spec: CellSpec, start, actions):
+    """Positions [T, B, 3] and net vertical contact forces [T, B] in the MJX physics of `spec`'s
+    overrides, replaying `actions` [T][B, 12] from `start` = (qpos, qvel, last action) on the
+    tiles the spec's seed places its robots on."""
+    env = cell_env(policy, spec)
+    state0 = initial_states(env, spec)
+    qpos, qvel, last = start
+    data = state0.pipeline_state.replace(qpos=jnp.asarray(qpos, jnp.float32),
+                                         qvel=jnp.asarray(qvel, jnp.float32))
+    st = state0.replace(pipeline_state=data, info=dict(state0.info, last_action=jnp.asarray(last)))
 
     def one(s, a):
         s = jax.vmap(env.step)(s, a)
-        return s, (s.pipeline_state.qpos[:, :3],
-                   jax.vmap(lambda d: _mjx_normal_force(env, d))(s.pipeline_state))
+        force = jax.vmap(lambda d: _mjx_vertical_force(env, d))(s.pipeline_state)
+        return s, (s.pipeline_state.qpos[:, :3], force)
 
     _, (pos, force) = jax.jit(lambda s, a: jax.lax.scan(one, s, a))(
         st, jnp.asarray(np.stack(actions)))

@@ -4,7 +4,7 @@ numpy + trimesh only (no JAX). Frame: x forward, y left, z up, metres; heights[i
 height at grid point (ix * res, iy * res).
 """
 
-from .atlas import Atlas, build_atlas
+from .atlas import Atlas, build_atlas, build_cell_atlas
 from .families import FAMILIES, make_tile, variants
 from .levels import SCHEDULES, Level, get_level, levels
 from .tile import (
@@ -20,6 +20,7 @@ from .tile import (
 
 __all__ = [
     "Atlas", "CENTRELINE_POINTS", "DEFAULT_RESOLUTION", "DEFAULT_TILE_SIZE", "FAMILIES",
-    "HEIGHT_QUANTUM", "SCHEDULES", "WALL_RISE", "Level", "Tile", "build_atlas", "get_level",
+    "HEIGHT_QUANTUM", "SCHEDULES", "WALL_RISE", "Level", "Tile", "build_atlas", "build_cell_atlas",
+    "get_level",
     "levels", "make_tile", "quantise", "sample_heights", "variants",
 ]

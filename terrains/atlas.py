@@ -161,6 +161,35 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
                  **{k: np.asarray(v, _dtype(k)) for k, v in tabs.items()})
 
 
+def build_cell_atlas(cells: Sequence[tuple[str, str, int]], variants_per_cell: int = 2,
+                     resolution: float = DEFAULT_RESOLUTION, tile_size: float = DEFAULT_TILE_SIZE,
+                     border: float = 2.0) -> Atlas:
+    """Any list of (family, schedule, 0-based level) cells, one row each, in one atlas: row r
+    holds ``variants_per_cell`` variants of cell r. The atlas has one family, "cells" (index 0),
+    so a robot of row r is placed with ``level=r, family=0``; ``level`` keeps each tile's own
+    0-based level in its schedule. For evaluating many cells under one compiled program."""
+    if not cells:
+        raise ValueError("build_cell_atlas needs at least one cell")
+    n = int(round(tile_size / resolution))
+    b = int(round(border / resolution))
+    rows, cols = len(cells), variants_per_cell
+    heights = np.zeros((2 * b + rows * n + 1, 2 * b + cols * n + 1), np.float32)
+    tabs = {k: [] for k in _TABLES}
+    for row, (fam, schedule, lvl) in enumerate(cells):
+        check_family(fam)
+        names = variants(fam)
+        for col in range(cols):
+            tile = make_tile(fam, int(lvl), names[col % len(names)], schedule, resolution,
+                             tile_size)
+            iy, ix = b + row * n, b + col * n
+            heights[iy:iy + n, ix:ix + n] = tile.heights
+            _append(tabs, tile, np.array([ix, iy]) * resolution, 0, col % len(names))
+    return Atlas(heights=heights, resolution=resolution, tile_size=tile_size, border=border,
+                 rows=rows, cols=cols, families=("cells",), schedule="cells",
+                 variant_names=(tuple(f"v{c}" for c in range(cols)),),
+                 **{k: np.asarray(v, _dtype(k)) for k, v in tabs.items()})
+
+
 def _dtype(key: str):
     return np.int32 if key in ("level", "family", "variant") else np.float32
 
@@ -183,4 +212,4 @@ def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> Non
     tabs["goal_height"].append(tile.goal_height)
 
 
-__all__ = ["Atlas", "build_atlas", "FAMILIES"]
+__all__ = ["Atlas", "build_atlas", "build_cell_atlas", "FAMILIES"]

@@ -1,0 +1,105 @@
+"""The fidelity table of issue 19: published policies in each MJX physics option (GPU) and in the
+CPU MuJoCo ground truth (box stairs, default solver), from the same starting states.
+
+  python experiments/gpu/fidelity.py mjx OUT [--robots 1000]           # GPU: every option
+  JAX_PLATFORMS=cpu python experiments/gpu/fidelity.py gt OUT [--robots 200] [--workers 12]
+
+Both write JSON under OUT (one file per MJX option, one per ground-truth cell), each file as soon
+as it is complete, so a run cut short keeps what it finished.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import time
+from pathlib import Path
+
+POLICIES = {
+    "stage2_u": "experiments/results/stage2_u/policy.npz",
+    "stage2_u_lean": "experiments/results/stage2_u_lean/policy.npz",
+}
+OPTIONS = {  # env overrides of each physics option
+    "reference": ("robot.terrain_contacts=mjx", "robot.shin_collision=true",
+                  "robot.ls_iterations=5"),
+    "lean": ("robot.terrain_contacts=nearest", "robot.shin_collision=false",
+             "robot.ls_iterations=3"),
+    "nearest_full": ("robot.terrain_contacts=nearest", "robot.shin_collision=true",
+                     "robot.ls_iterations=5"),
+}
+CELLS = (
+    [("u_shaped", "test", lv) for lv in range(6)]
+    + [("u_shaped", "extended", lv) for lv in range(6)]
+    + [("straight", "extended", lv) for lv in range(6)]
+)
+
+
+def write(path: Path, record: dict) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(record, indent=1))
+    os.replace(tmp, path)
+
+
+def run_mjx(out: Path, robots: int, options: list[str]) -> None:
+    import jax
+
+    from mjx_stairs.evaluate import CellSpec, success_by_cell
+    from mjx_stairs.train import load_policy
+
+    policies = {k: load_policy(v) for k, v in POLICIES.items()}
+    for name in options:
+        t0 = time.time()
+        spec = CellSpec(cells=tuple(CELLS), robots_per_cell=robots, env_overrides=OPTIONS[name])
+        res = success_by_cell(policies, spec)
+        record = {"option": name, "device": jax.devices()[0].device_kind,
+                  "wall_s_with_compile": time.time() - t0, "policies": res}
+        write(out / f"mjx_{name}.json", record)
+        print(f"[fidelity] {name}: {time.time() - t0:.0f} s", flush=True)
+        for p, r in res.items():
+            print(p, name, [round(100 * s, 1) for s in r["success"]], flush=True)
+
+
+def _gt_task(args) -> str:
+    policy_name, cell, robots, out = args
+    from mjx_stairs.evaluate import CellSpec
+    from mjx_stairs.ground_truth import success_in_ground_truth
+    from mjx_stairs.train import load_policy
+
+    path = Path(out) / f"gt_{policy_name}_{cell[0]}_{cell[1]}_{cell[2] + 1}.json"
+    if path.exists():
+        return f"{path.name} (kept)"
+    spec = CellSpec(cells=(cell,), robots_per_cell=robots, env_overrides=OPTIONS["reference"])
+    rec = success_in_ground_truth(load_policy(POLICIES[policy_name]), spec, nthread=1)
+    rec["policy"] = policy_name
+    write(path, rec)
+    return f"{path.name}: {100 * rec['success'][0]:.1f} % ({rec['wall_s']:.0f} s)"
+
+
+def run_gt(out: Path, robots: int, workers: int) -> None:
+    tasks = [(p, c, robots, str(out)) for c in CELLS for p in POLICIES]
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(workers) as pool:
+        for line in pool.imap_unordered(_gt_task, tasks):
+            print("[gt]", line, flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("mjx", "gt"))
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--robots", type=int, default=None)
+    ap.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) - 2))
+    ap.add_argument("--options", default=",".join(OPTIONS))
+    a = ap.parse_args()
+    a.out.mkdir(parents=True, exist_ok=True)
+    if a.what == "mjx":
+        run_mjx(a.out, a.robots or 1000, a.options.split(","))
+    else:
+        os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
+        run_gt(a.out, a.robots or 200, a.workers)
+
+
+if __name__ == "__main__":
+    main()
