@@ -41,12 +41,15 @@ def build_model(
     boxes: np.ndarray,
     config: rb.RobotConfig | None = None,
     solver: SolverConfig | None = None,
+    heightfield: tuple[np.ndarray, float] | None = None,
 ) -> mujoco.MjModel:
     """The Go2 standing among `boxes` [M, 6] (cx, cy, cz, hx, hy, hz), PD as actuators.
 
     Collision spheres are spheres whatever `config.terrain_contacts` says; mid-shin spheres
     collide when `config.shin_collision`. Gains are `config.kp` / `config.kd`, limits the
-    reference torque limits times `config.torque_scale`.
+    reference torque limits times `config.torque_scale`. `heightfield` = (heights, resolution)
+    stands the robot on that heightfield instead (MuJoCo's own heightfield collider, the
+    terrain shape MJX sees: for telling the terrain's shape from MJX's solver and collider).
     """
     config = config or rb.RobotConfig()
     solver = solver or DEFAULT_SOLVER
@@ -55,6 +58,9 @@ def build_model(
     spec.option.iterations = solver.iterations
     spec.option.ls_iterations = solver.ls_iterations
     spec.option.tolerance = solver.tolerance
+    if heightfield is not None:
+        rb.add_heightfield(spec, np.asarray(heightfield[0], np.float32), heightfield[1],
+                           config.friction)
     for i, (cx, cy, cz, hx, hy, hz) in enumerate(np.asarray(boxes, np.float64)):
         spec.worldbody.add_geom(
             name=f"stair{i}",

@@ -45,8 +45,15 @@ def env_heights(env: envlib.StairEnv) -> np.ndarray:
 
 
 def tile_model(env: envlib.StairEnv, tile: int, tile_size: float,
-               solver: bw.SolverConfig = bw.DEFAULT_SOLVER) -> mujoco.MjModel:
-    """The box world of one atlas tile, in world coordinates (so env states carry over)."""
+               solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
+               terrain: str = "boxes") -> mujoco.MjModel:
+    """The box world of one atlas tile, in world coordinates (so env states carry over).
+    `terrain="heightfield"`: the atlas heightfield instead of boxes (the shape MJX sees)."""
+    if terrain == "heightfield":
+        return bw.build_model(np.zeros((0, 6)), env.config.robot, solver,
+                              heightfield=(env_heights(env), env.resolution))
+    if terrain != "boxes":
+        raise ValueError(f"terrain must be 'boxes' or 'heightfield', got {terrain!r}")
     res = env.resolution
     heights = env_heights(env)
     n = int(round(tile_size / res))
@@ -99,7 +106,7 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
 
 def success_in_ground_truth(
     policy: Policy, spec: CellSpec, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
-    nthread: int | None = None,
+    nthread: int | None = None, terrain: str = "boxes",
 ) -> dict[str, Any]:
     """`evaluate.success_by_cell` with CPU MuJoCo on box stairs in place of MJX.
 
@@ -111,7 +118,8 @@ def success_in_ground_truth(
     info = {k: v for k, v in state.info.items() if k != "final_obs"}
     tiles = np.asarray(info["tile"])
     B = tiles.shape[0]
-    models = {int(t): tile_model(env, int(t), spec.tile_size, solver) for t in np.unique(tiles)}
+    models = {int(t): tile_model(env, int(t), spec.tile_size, solver, terrain)
+              for t in np.unique(tiles)}
     batch = bw.Batch([models[int(t)] for t in tiles], np.asarray(state.pipeline_state.qpos),
                      nthread=nthread)
     goal = np.asarray(env.goals)[tiles]
@@ -140,8 +148,8 @@ def success_in_ground_truth(
     batch.close()
     per_cell = ep.time_to_goal.reshape(len(spec.cells), -1)
     return cell_records(
-        spec, ep.success, ep.fell, physics="ground_truth", solver=dataclasses.asdict(solver),
-        wall_s=time.time() - t0,
+        spec, ep.success, ep.fell, physics=f"mujoco_cpu_{terrain}",
+        solver=dataclasses.asdict(solver), wall_s=time.time() - t0,
         mean_time_to_goal_s=[float(np.nanmean(t)) if np.isfinite(t).any() else None
                              for t in per_cell],
     )

@@ -125,6 +125,29 @@ def build_mj_model(
         raise ValueError(f"heights must be a 2-D grid of at least 2 x 2, got shape {heights.shape}")
     if not np.all(np.isfinite(heights)):
         raise ValueError("heights contain NaN or infinite values")
+    add_heightfield(spec, heights, resolution, config.friction)
+    for name in SPHERE_GROUPS["foot"]:
+        spec.geom(name).friction = [config.friction, 0.02, 0.01]
+    if not config.shin_collision:
+        for name in SPHERE_GROUPS["shin"]:
+            spec.geom(name).contype = 0
+    if config.terrain_contacts == "nearest":
+        # The same spheres as ellipsoids with equal radii: MJX then collides them with the
+        # terrain through mjx_stairs.contact (registered for heightfield-ellipsoid pairs).
+        for name in (n for group in SPHERE_GROUPS.values() for n in group):
+            geom = spec.geom(name)
+            geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
+            geom.size = [geom.size[0]] * 3
+    elif config.terrain_contacts != "mjx":
+        raise ValueError(
+            f"robot.terrain_contacts must be 'mjx' or 'nearest', got {config.terrain_contacts!r}"
+        )
+    return spec.compile()
+
+
+def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,
+                    friction: float) -> None:
+    """Add the terrain heightfield `heights` [ny, nx] (at world (ix * res, iy * res)) to `spec`."""
     ny, nx = heights.shape
     lo, hi = float(heights.min()), float(heights.max())
     span = hi - lo
@@ -145,25 +168,8 @@ def build_mj_model(
         contype=0,
         conaffinity=1,
         material="terrain",
-        friction=[config.friction, 0.02, 0.01],
+        friction=[friction, 0.02, 0.01],
     )
-    for name in SPHERE_GROUPS["foot"]:
-        spec.geom(name).friction = [config.friction, 0.02, 0.01]
-    if not config.shin_collision:
-        for name in SPHERE_GROUPS["shin"]:
-            spec.geom(name).contype = 0
-    if config.terrain_contacts == "nearest":
-        # The same spheres as ellipsoids with equal radii: MJX then collides them with the
-        # terrain through mjx_stairs.contact (registered for heightfield-ellipsoid pairs).
-        for name in (n for group in SPHERE_GROUPS.values() for n in group):
-            geom = spec.geom(name)
-            geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
-            geom.size = [geom.size[0]] * 3
-    elif config.terrain_contacts != "mjx":
-        raise ValueError(
-            f"robot.terrain_contacts must be 'mjx' or 'nearest', got {config.terrain_contacts!r}"
-        )
-    return spec.compile()
 
 
 def robot_ids(model: mujoco.MjModel) -> RobotIds:

@@ -3,6 +3,8 @@ CPU MuJoCo ground truth (box stairs, default solver), from the same starting sta
 
   python experiments/gpu/fidelity.py mjx OUT [--robots 1000]           # GPU: every option
   JAX_PLATFORMS=cpu python experiments/gpu/fidelity.py gt OUT [--robots 200] [--workers 12]
+Both take --resolution (grid, m) and --cells (indices into CELLS); gt takes --terrain
+boxes|heightfield (heightfield: CPU MuJoCo on the very heightfield MJX sees).
 
 Both write JSON under OUT (one file per MJX option, one per ground-truth cell), each file as soon
 as it is complete, so a run cut short keeps what it finished.
@@ -28,6 +30,9 @@ OPTIONS = {  # env overrides of each physics option
              "robot.ls_iterations=3"),
     "nearest_full": ("robot.terrain_contacts=nearest", "robot.shin_collision=true",
                      "robot.ls_iterations=5"),
+    # MJX's collider with a solver run near convergence: tells the solver from the collider
+    "mjx_converged": ("robot.terrain_contacts=mjx", "robot.shin_collision=true",
+                      "robot.solver_iterations=8", "robot.ls_iterations=10"),
 }
 CELLS = (
     [("u_shaped", "test", lv) for lv in range(6)]
@@ -42,7 +47,7 @@ def write(path: Path, record: dict) -> None:
     os.replace(tmp, path)
 
 
-def run_mjx(out: Path, robots: int, options: list[str]) -> None:
+def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float) -> None:
     import jax
 
     from mjx_stairs.evaluate import CellSpec, success_by_cell
@@ -51,7 +56,8 @@ def run_mjx(out: Path, robots: int, options: list[str]) -> None:
     policies = {k: load_policy(v) for k, v in POLICIES.items()}
     for name in options:
         t0 = time.time()
-        spec = CellSpec(cells=tuple(CELLS), robots_per_cell=robots, env_overrides=OPTIONS[name])
+        spec = CellSpec(cells=tuple(cells), robots_per_cell=robots, env_overrides=OPTIONS[name],
+                        resolution=res)
         res = success_by_cell(policies, spec)
         record = {"option": name, "device": jax.devices()[0].device_kind,
                   "wall_s_with_compile": time.time() - t0, "policies": res}
@@ -62,7 +68,7 @@ def run_mjx(out: Path, robots: int, options: list[str]) -> None:
 
 
 def _gt_task(args) -> str:
-    policy_name, cell, robots, out = args
+    policy_name, cell, robots, out, res, terrain = args
     from mjx_stairs.evaluate import CellSpec
     from mjx_stairs.ground_truth import success_in_ground_truth
     from mjx_stairs.train import load_policy
@@ -70,15 +76,17 @@ def _gt_task(args) -> str:
     path = Path(out) / f"gt_{policy_name}_{cell[0]}_{cell[1]}_{cell[2] + 1}.json"
     if path.exists():
         return f"{path.name} (kept)"
-    spec = CellSpec(cells=(cell,), robots_per_cell=robots, env_overrides=OPTIONS["reference"])
-    rec = success_in_ground_truth(load_policy(POLICIES[policy_name]), spec, nthread=1)
+    spec = CellSpec(cells=(cell,), robots_per_cell=robots, env_overrides=OPTIONS["reference"],
+                    resolution=res)
+    rec = success_in_ground_truth(load_policy(POLICIES[policy_name]), spec, nthread=1,
+                                  terrain=terrain)
     rec["policy"] = policy_name
     write(path, rec)
     return f"{path.name}: {100 * rec['success'][0]:.1f} % ({rec['wall_s']:.0f} s)"
 
 
-def run_gt(out: Path, robots: int, workers: int) -> None:
-    tasks = [(p, c, robots, str(out)) for c in CELLS for p in POLICIES]
+def run_gt(out: Path, robots: int, workers: int, cells: list, res: float, terrain: str) -> None:
+    tasks = [(p, c, robots, str(out), res, terrain) for c in cells for p in POLICIES]
     ctx = multiprocessing.get_context("spawn")
     with ctx.Pool(workers) as pool:
         for line in pool.imap_unordered(_gt_task, tasks):
@@ -91,14 +99,18 @@ def main() -> None:
     ap.add_argument("out", type=Path)
     ap.add_argument("--robots", type=int, default=None)
     ap.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) - 2))
-    ap.add_argument("--options", default=",".join(OPTIONS))
+    ap.add_argument("--options", default="reference,lean,nearest_full")
+    ap.add_argument("--resolution", type=float, default=0.025)
+    ap.add_argument("--cells", default="", help="comma-separated indices into CELLS; '' = all")
+    ap.add_argument("--terrain", default="boxes", choices=("boxes", "heightfield"))
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
+    cells = [CELLS[int(i)] for i in a.cells.split(",")] if a.cells else CELLS
     if a.what == "mjx":
-        run_mjx(a.out, a.robots or 1000, a.options.split(","))
+        run_mjx(a.out, a.robots or 1000, a.options.split(","), cells, a.resolution)
     else:
         os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
-        run_gt(a.out, a.robots or 200, a.workers)
+        run_gt(a.out, a.robots or 200, a.workers, cells, a.resolution, a.terrain)
 
 
 if __name__ == "__main__":
