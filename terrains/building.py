@@ -251,11 +251,11 @@ def _zigzag(s: Staircase) -> Layout:
         run = (n - 1) * t
         u0 = x if climb > 0 else x - run
         regions.append(_flight(0, u0, heights[k], t, col[k], col[k] + w, climb))
-        flights.append(dict(kind="straight", start=[x, yc], dir=[float(climb), 0.0], n=n,
-                            base=_level(base * s.riser), width=w,
-                            heights=[float(v) for v in heights[k]]))
         base += n
         z = _level(base * s.riser)
+        flights.append(dict(kind="straight", start=[x, yc], dir=[float(climb), 0.0], n=n,
+                            base=_level((base - n) * s.riser), top=z, width=w,
+                            heights=[float(v) for v in heights[k]]))
         end = x + climb * run                  # last riser
         last = k == len(s.flights) - 1
         depth = TOP_LENGTH if last else d
@@ -300,14 +300,14 @@ def _l_turn(s: Staircase) -> Layout:
     base2 = n1 + (s.winders - 1 if winder else 0)
     top = s.total_rise
     regions = [rect(0, a, 0, w, 0.0), _flight(0, a, heights[0], t, 0, w, 1)]
-    flights = [dict(kind="straight", start=[a, w / 2], dir=[1.0, 0.0], n=n1, base=0.0, width=w,
-                    heights=[float(v) for v in heights[0]])]
+    flights = [dict(kind="straight", start=[a, w / 2], dir=[1.0, 0.0], n=n1, base=0.0, top=mid,
+                    width=w, heights=[float(v) for v in heights[0]])]
     goal = (x2 + w / 2, yt + TOP_LENGTH / 2, np.pi / 2)
     if winder:
         wh = np.concatenate([[mid], heights[1]])      # winder 1 at the top of flight 1
         regions.append(_winders((xl, w), w, wh))
         flights.append(dict(kind="winder", centre=[xl, w], radius=w / 2, theta0=-np.pi / 2,
-                            sweep=np.pi / 2, n=s.winders, base=mid, width=w,
+                            sweep=np.pi / 2, n=s.winders, base=mid, top=float(wh[-1]), width=w,
                             heights=[float(v) for v in wh]))
         path = [line((a / 2, w / 2), (xl, w / 2)), arc((xl, w), w / 2, -np.pi / 2, 0.0),
                 line((xl + w / 2, w), goal[:2])]
@@ -315,11 +315,11 @@ def _l_turn(s: Staircase) -> Layout:
         regions.append(rect(xl, xl + depth, 0, w, mid))
         corner = (x2 + w / 2, w / 2)
         path = [line((a / 2, w / 2), corner), line(corner, goal[:2])]
-    b2 = _level(base2 * s.riser)
+    b2 = float(wh[-1]) if winder else _level(base2 * s.riser)   # the last winder (with its error)
     regions += [_flight(1, w, heights[-1], t, x2, x2 + w, 1),
                 rect(x2, x2 + w, yt, yt + TOP_LENGTH, top)]
     flights.append(dict(kind="straight", start=[x2 + w / 2, w], dir=[0.0, 1.0], n=n2, base=b2,
-                        width=w, heights=[float(v) for v in heights[-1]]))
+                        top=top, width=w, heights=[float(v) for v in heights[-1]]))
     outline = [[0, 0], [xl + depth, yt + TOP_LENGTH]]
     if s.open_side:
         regions.insert(0, rect(0, xl + depth, -OPEN_WIDTH, 0, 0.0))
@@ -404,7 +404,7 @@ def _spiral(s: Staircase) -> Layout:
     outline = np.concatenate([circle * (r_out + (OPEN_WIDTH if s.open_side else 0.0)),
                               [[r_out + L, g / 2 + c]], corners])
     flight = dict(kind="arc", centre=[0.0, 0.0], radius=rw, r_in=r_in, r_out=r_out,
-                  theta0=th0, sweep=th1 - th0, n=n, base=0.0, width=w,
+                  theta0=th0, sweep=th1 - th0, n=n, base=0.0, top=top, width=w,
                   heights=[float(h) for h in heights], walk=[phi, th_end - phi])
     if s.open_side:
         flight["open"] = "outer"
@@ -429,7 +429,8 @@ def _exit_rect(u, v, r_out, L, g, c):
 def difficulty(s: Staircase) -> float:
     """Difficulty index: riser first, then width, landing depth, curvature, open side.
     Each key is normalised to [0, 1] over the generator's ranges and weighted 1, 0.1, 0.01,
-    0.001, 0.0001, so sorting by it sorts by riser, ties broken by the next keys."""
+    0.001, 0.0001: the riser dominates (risers more than 2.2 cm apart, more than a train level's
+    band, are always in riser order), then each key breaks the near-ties of the one before."""
     keys = difficulty_key(s)
     return float(sum(k * 10.0 ** -i for i, k in enumerate(keys)))
 

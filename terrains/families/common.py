@@ -245,6 +245,9 @@ def _map_flight(f: dict, to_tile, how: str) -> dict:
         elif how == "turn":
             th0 = th0 + np.pi
         out["theta0"], out["sweep"] = float(th0), float(sweep)
+    if "walk" in f:  # angles of the walking line's ends on the arc
+        sign, shift = (-1.0, 0.0) if how == "mirror" else (1.0, np.pi if how == "turn" else 0.0)
+        out["walk"] = [float(sign * a + shift) for a in f["walk"]]
     return out
 
 
