@@ -246,8 +246,9 @@ def through_landings(cells: np.ndarray, h: np.ndarray, d_flat: np.ndarray, large
     large flat patch becomes entry -> nearest ridge point -> ridge point nearest the exit -> exit
     (the ridge: the points within a grid step of the largest d_flat among the patch's points
     within 2 CENTRE_CAP of the run, so that a ring-shaped floor is not left for its corners).
-    A run stays as searched if the pieces would leave the patch or pass closer (by 0.1 m) to a
-    wall than the run does (``clear``: the clearance field), e.g. across a curved landing."""
+    A run stays as searched if the pieces would leave the patch or come closer to a wall than
+    0.8 x the run's closest approach (``clear``: the clearance field; the margin covers the
+    chamfer metric's error), e.g. across a curved landing."""
     out, i, m = [], 0, len(cells)
     xy = cells[:, ::-1] * resolution
     while i < m:
@@ -269,9 +270,9 @@ def through_landings(cells: np.ndarray, h: np.ndarray, d_flat: np.ndarray, large
         re = ridge[np.argmin(np.hypot(*(ridge - e).T))]
         rx = ridge[np.argmin(np.hypot(*(ridge - x).T))]
         piece = np.array([e, re, rx, x])
-        if _on_patch(piece, patch, resolution) and (clear is None or _min_on(
-                piece, clear, resolution) >= clear[cells[i:j + 1, 0], cells[i:j + 1, 1]].min()
-                - 0.1):
+        closest = 0.0 if clear is None else clear[cells[i:j + 1, 0], cells[i:j + 1, 1]].min()
+        if _on_patch(piece, patch, resolution) and (
+                clear is None or _min_on(piece, clear, resolution) >= 0.8 * closest):
             out.append(piece)
         else:
             out.append(xy[i:j + 1])
