@@ -5,12 +5,14 @@ height at grid point (ix * res, iy * res).
 """
 
 from .atlas import Atlas, build_atlas, build_cell_atlas
-from .families import FAMILIES, make_tile, variants
-from .levels import SCHEDULES, Level, get_level, levels
+from .building import Staircase, difficulty, sample_staircase, staircase_tile
+from .families import FAMILIES, PAPER_FAMILIES, make_tile, variants
+from .levels import SCHEDULES, BuildingLevel, Level, get_level, levels
 from .tile import (
     CENTRELINE_POINTS,
     DEFAULT_RESOLUTION,
     DEFAULT_TILE_SIZE,
+    DIRECTIONS,
     HEIGHT_QUANTUM,
     WALL_RISE,
     Tile,
@@ -19,8 +21,9 @@ from .tile import (
 )
 
 __all__ = [
-    "Atlas", "CENTRELINE_POINTS", "DEFAULT_RESOLUTION", "DEFAULT_TILE_SIZE", "FAMILIES",
-    "HEIGHT_QUANTUM", "SCHEDULES", "WALL_RISE", "Level", "Tile", "build_atlas", "build_cell_atlas",
-    "get_level",
-    "levels", "make_tile", "quantise", "sample_heights", "variants",
+    "Atlas", "BuildingLevel", "CENTRELINE_POINTS", "DEFAULT_RESOLUTION", "DEFAULT_TILE_SIZE",
+    "DIRECTIONS", "FAMILIES", "HEIGHT_QUANTUM", "PAPER_FAMILIES", "SCHEDULES", "Staircase",
+    "WALL_RISE", "Level", "Tile", "build_atlas", "build_cell_atlas", "difficulty", "get_level",
+    "levels",
+    "make_tile", "quantise", "sample_heights", "sample_staircase", "staircase_tile", "variants",
 ]

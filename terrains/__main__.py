@@ -1,10 +1,15 @@
-"""Command line: python -m terrains {preview, export, import, atlas} ...
+"""Command line: python -m terrains {preview, export, import, atlas, suite, sample} ...
 
-  preview FAMILY --level N [--variant V] [--schedule S] --out file.png
-  export  FAMILY --level N [--variant V] [--schedule S] --out file.glb|.obj|.stl|.ply
+  preview FAMILY --level N [--variant V] [--schedule S] [--direction up|down] [--seed K]
+          --out file.png
+  export  FAMILY --level N [--variant V] [--schedule S] [--direction D] --out file.glb|.obj|.stl
   export  saved.npz --out file.glb           (a saved tile or atlas)
   import  mesh.obj --start x,y --goal x,y --out tile.npz [--preview file.png]
-  atlas   FAMILY [FAMILY ...] [--schedule S] [--levels 1,2,3] [--variants K] --out atlas.npz
+  atlas   FAMILY [FAMILY ...] [--schedule S] [--levels 1,2,3] [--variants K] [--direction D]
+          --out atlas.npz
+  suite   NAME --out DIR [--previews]       (a fixed suite: code, paper; mesh + JSON per case)
+  sample  [--levels 1,5,10] [--variants all] [--directions up,down] [--seeds K] --out DIR
+          (building staircases sampled from the building family's levels; mesh + JSON each)
 Levels are 1-based on the command line. Errors print one line and exit with status 2.
 """
 
@@ -14,7 +19,7 @@ import argparse
 import sys
 
 from .levels import SCHEDULES
-from .tile import DEFAULT_RESOLUTION, DEFAULT_TILE_SIZE
+from .tile import DEFAULT_RESOLUTION, DEFAULT_TILE_SIZE, DIRECTIONS
 
 
 def _xy(text: str) -> tuple[float, float]:
@@ -26,10 +31,13 @@ def _xy(text: str) -> tuple[float, float]:
 
 
 def _tile_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("family", help="pyramid, straight, l_shaped, u_shaped or spiral")
+    p.add_argument("family", help="pyramid, straight, l_shaped, u_shaped, spiral or building")
     p.add_argument("--level", type=int, required=True, help="1-based level")
-    p.add_argument("--variant", default=None, help="e.g. left/right, cw/ccw, +x (default: first)")
+    p.add_argument("--variant", default=None,
+                   help="e.g. left/right, cw/ccw, +x, u_left, spiral_cw (default: first)")
     p.add_argument("--schedule", default="train", choices=SCHEDULES)
+    p.add_argument("--direction", default="up", choices=DIRECTIONS)
+    p.add_argument("--seed", type=int, default=0, help="building: which sampled staircase")
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION, help="metres")
     p.add_argument("--tile-size", type=float, default=DEFAULT_TILE_SIZE, help="metres")
     p.add_argument("--out", required=True)
@@ -59,8 +67,29 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION)
     p.add_argument("--tile-size", type=float, default=DEFAULT_TILE_SIZE)
     p.add_argument("--border", type=float, default=2.0)
+    p.add_argument("--direction", default="up", choices=("up", "down", "both"))
+    p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
+    p = sub.add_parser("suite", help="write a fixed suite (code, paper) as meshes + JSON")
+    p.add_argument("name")
+    _folder_args(p)
+    p = sub.add_parser("sample", help="write sampled building staircases as meshes + JSON")
+    p.add_argument("--levels", default="1,5,10", help="1-based building levels")
+    p.add_argument("--schedule", default="train", choices=SCHEDULES)
+    p.add_argument("--variants", default="all", help="comma separated, or all")
+    p.add_argument("--directions", default="up,down")
+    p.add_argument("--seeds", type=int, default=1, help="staircases per level and variant")
+    p.add_argument("--tile-size", type=float, default=DEFAULT_TILE_SIZE,
+                   help="the sampler fits every staircase into this square")
+    _folder_args(p)
     return ap
+
+
+def _folder_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION)
+    p.add_argument("--format", default="stl", choices=("stl", "obj", "ply", "glb"))
+    p.add_argument("--previews", action="store_true", help="also write name.png per case")
+    p.add_argument("--out", required=True, help="folder")
 
 
 def _make(a):
@@ -72,7 +101,8 @@ def _make(a):
     if not 1 <= a.level <= count:
         raise ValueError(f"--level {a.level} out of range: {a.family} has levels 1..{count} "
                          f"in schedule {a.schedule!r}")
-    return make_tile(a.family, a.level - 1, a.variant, a.schedule, a.resolution, a.tile_size)
+    return make_tile(a.family, a.level - 1, a.variant, a.schedule, a.resolution, a.tile_size,
+                     direction=a.direction, seed=a.seed)
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -106,10 +136,51 @@ def run(argv: list[str] | None = None) -> int:
         from .atlas import build_atlas
         levels = None if a.levels is None else [int(v) - 1 for v in a.levels.split(",")]
         at = build_atlas(a.families, a.schedule, levels, a.variants, a.resolution, a.tile_size,
-                         a.border)
+                         a.border, direction=a.direction, seed=a.seed)
         at.save(a.out)
         print(f"wrote {a.out}: {at.rows} x {at.cols} tiles, heights {at.heights.shape}")
+    elif a.cmd in ("suite", "sample"):
+        _write_folder(a)
     return 0
+
+
+def _sample_cases(a):
+    """(name, tile) of the sampled building staircases the ``sample`` command asks for."""
+    from .families import make_tile, variants
+    from .levels import levels as level_table
+    count = len(level_table("building", a.schedule))
+    lvls = [int(v) for v in a.levels.split(",")]
+    for lv in lvls:
+        if not 1 <= lv <= count:
+            raise ValueError(f"--levels {lv} out of range: building has levels 1..{count}")
+    names = variants("building") if a.variants == "all" else tuple(a.variants.split(","))
+    dirs = tuple(a.directions.split(","))
+    for d in dirs:
+        if d not in DIRECTIONS:
+            raise ValueError(f"--directions: unknown direction {d!r}; known: up, down")
+    for lv in lvls:
+        for v in names:
+            for seed in range(a.seeds):
+                up = make_tile("building", lv - 1, v, a.schedule, a.resolution, a.tile_size,
+                               seed=seed)
+                for d in dirs:
+                    yield f"building_level{lv}_{v}_s{seed}_{d}", up.with_direction(d)
+
+
+def _write_folder(a) -> None:
+    from .suites import load_suite, write_case
+    if a.cmd == "suite":
+        cases = ((c.name, c.tile(a.resolution)) for c in load_suite(a.name))
+    else:
+        cases = _sample_cases(a)
+    n = 0
+    for name, tile in cases:
+        write_case(tile, a.out, name, a.format)
+        if a.previews:
+            from .preview import render_tile
+            render_tile(tile, f"{a.out}/{name}.png", size_px=450, title=name)
+        n += 1
+    print(f"wrote {n} cases ({a.format} + json) to {a.out}")
 
 
 def _load_npz_heights(path: str):

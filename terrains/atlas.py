@@ -28,7 +28,8 @@ from .tile import (
 )
 
 _TABLES = ("origin", "spawn", "goal", "centreline", "level", "family", "variant",
-           "floor_height", "goal_height")
+           "floor_height", "goal_height", "direction")
+ATLAS_DIRECTIONS = ("up", "down", "both")
 
 
 @dataclass(eq=False)
@@ -45,6 +46,7 @@ class Atlas:
     origin [n, 2] tile corner xy; spawn [n, 7]; goal [n, 4]; centreline [n, K, 3];
     level [n] int32 (0-based); family [n] int32; variant [n] int32 (index into the family's
     variants); floor_height [n] float32; goal_height [n] float32.
+    direction [n] int32: 0 = up (spawn at the foot), 1 = down (spawn on the top landing).
     variant_names: per family, the names its variant ids refer to.
     """
 
@@ -64,8 +66,13 @@ class Atlas:
     variant: np.ndarray
     floor_height: np.ndarray
     goal_height: np.ndarray
+    direction: np.ndarray = None  # type: ignore[assignment]
     schedule: str = "train"
     variant_names: tuple[tuple[str, ...], ...] = ()
+
+    def __post_init__(self):
+        if self.direction is None:
+            self.direction = np.zeros(len(self.level), np.int32)
 
     @property
     def num_tiles(self) -> int:
@@ -95,7 +102,9 @@ class Atlas:
     def load(cls, path: str | os.PathLike) -> Atlas:
         """Read an atlas written by save(); missing file -> FileNotFoundError, anything
         unreadable -> one-line ValueError naming the file."""
-        data = load_npz(path, "atlas", ("heights", "meta") + _TABLES)
+        data = load_npz(path, "atlas", ("heights", "meta") + _TABLES[:-1])
+        if "direction" not in data:   # atlases saved before directions existed: all "up"
+            data["direction"] = np.zeros(len(data["level"]), np.int32)
         try:
             m = json.loads(str(data["meta"]))
             atlas = cls(heights=data["heights"], resolution=float(m["resolution"]),
@@ -115,10 +124,17 @@ class Atlas:
 def build_atlas(families: Sequence[str], schedule: str = "train",
                 levels: Sequence[int] | None = None, variants_per_family: int = 2,
                 resolution: float = DEFAULT_RESOLUTION, tile_size: float = DEFAULT_TILE_SIZE,
-                border: float = 2.0) -> Atlas:
+                border: float = 2.0, direction: str = "up", seed: int = 0) -> Atlas:
     """Tiles of ``families`` (0-based ``levels`` of ``schedule``, default all) in a grid:
     row = level, columns = for each family ``variants_per_family`` tiles cycling through its
-    variants. heights [NY, NX] with NX = (2 border + cols tile_size) / res + 1."""
+    variants. heights [NY, NX] with NX = (2 border + cols tile_size) / res + 1.
+
+    direction: "up", "down" (every tile walked down: same heights, spawn on the top landing),
+    or "both": each column is followed by the same tile walked down (twice the columns; the
+    heights are copied, so an env can pick a direction by picking a column).
+    seed: the building family samples a staircase per tile from (schedule, level, variant,
+    seed + k), k = how many times the column cycle has passed the variant (so repeated
+    variants in a row are different staircases); the other families ignore it."""
     families = tuple(families)
     if not families:
         raise ValueError("build_atlas needs at least one family")
@@ -128,6 +144,9 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
         raise ValueError(f"variants_per_family must be >= 1, got {variants_per_family}")
     if border < 0:
         raise ValueError(f"border must be >= 0, got {border}")
+    if direction not in ATLAS_DIRECTIONS:
+        raise ValueError(f"unknown direction {direction!r}; known: {', '.join(ATLAS_DIRECTIONS)}")
+    dirs = ("up", "down") if direction == "both" else (direction,)
     sizes = {len(level_table(f, schedule)) for f in families}
     if levels is None:
         if len(sizes) != 1:
@@ -137,7 +156,7 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
     levels = [int(v) for v in levels]
     if not levels:
         raise ValueError("build_atlas needs at least one level")
-    rows, cols = len(levels), len(families) * variants_per_family
+    rows, cols = len(levels), len(families) * variants_per_family * len(dirs)
     n = int(round(tile_size / resolution))
     b = int(round(border / resolution))
     if abs(b * resolution - border) > 1e-6 * max(border, 1.0):
@@ -147,11 +166,16 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
     tabs = {k: [] for k in _TABLES}
     for row, lvl in enumerate(levels):
         for col in range(cols):
-            fi, vi = divmod(col, variants_per_family)
+            k, di = divmod(col, len(dirs))
+            fi, vi = divmod(k, variants_per_family)
             fam = families[fi]
             names = variants(fam)
-            vi %= len(names)
-            tile = make_tile(fam, lvl, names[vi], schedule, resolution, tile_size)
+            cycle, vi = divmod(vi, len(names))
+            if di == 0:
+                tile = make_tile(fam, lvl, names[vi], schedule, resolution, tile_size,
+                                 direction=dirs[0], seed=seed + cycle)
+            else:
+                tile = tile.reversed()
             iy, ix = b + row * n, b + col * n
             heights[iy:iy + n, ix:ix + n] = tile.heights
             _append(tabs, tile, np.array([ix, iy]) * resolution, fi, vi)
@@ -191,7 +215,7 @@ def build_cell_atlas(cells: Sequence[tuple[str, str, int]], variants_per_cell: i
 
 
 def _dtype(key: str):
-    return np.int32 if key in ("level", "family", "variant") else np.float32
+    return np.int32 if key in ("level", "family", "variant", "direction") else np.float32
 
 
 def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> None:
@@ -210,6 +234,7 @@ def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> Non
     tabs["variant"].append(vi)
     tabs["floor_height"].append(tile.floor_height)
     tabs["goal_height"].append(tile.goal_height)
+    tabs["direction"].append(0 if tile.direction == "up" else 1)
 
 
 __all__ = ["Atlas", "build_atlas", "build_cell_atlas", "FAMILIES"]

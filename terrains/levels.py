@@ -9,6 +9,12 @@ A level is a small frozen dataclass of the staircase's dimensions. Three schedul
 - ``extended``: past the paper toward building-code stairs (risers up to 0.20 m, treads down to
   0.25 m, widths down to 0.9 m).
 
+The ``building`` family (real indoor staircases, terrains/building.py) has levels that are
+RANGES (``BuildingLevel``): every tile samples its own staircase inside them. Its train levels
+are ordered by the difficulty index (riser band first, then narrower width, shallower landings,
+tighter curvature, open sides); ``test`` has the same bands (tiles use other seeds),
+``extended`` the hardest, building-code corner of the space.
+
 Level indices are 0-based everywhere in code; file names and the CLI's ``--level`` are 1-based.
 """
 
@@ -16,6 +22,8 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
+
+import numpy as np
 
 SCHEDULES = ("train", "test", "extended")
 
@@ -36,6 +44,51 @@ class Level:
     width: float
     steps: int
     landing: float = 0.0
+
+
+@dataclass(frozen=True)
+class BuildingLevel:
+    """Ranges a ``building`` tile samples its staircase from (metres, (lo, hi) inclusive).
+
+    riser, tread, width, landing: dimension ranges; steps: risers per flight;
+    inner_radius: spiral core radius; max_turns: largest spiral turn (quarter turns);
+    open_prob: probability that one side is open (a drop-off) instead of walled;
+    height_error: amplitude of the random tread height errors (uniform +-, whole mm).
+    """
+
+    riser: tuple[float, float]
+    tread: tuple[float, float] = (0.24, 0.35)
+    width: tuple[float, float] = (0.8, 2.0)
+    landing: tuple[float, float] = (0.9, 1.8)
+    steps: tuple[int, int] = (3, 18)
+    inner_radius: tuple[float, float] = (0.3, 1.0)
+    max_turns: float = 1.0
+    open_prob: float = 0.0
+    height_error: float = 0.005
+
+
+def _building(n: int, riser=(0.02, 0.21), width_lo=(1.88, 0.8), landing_lo=(1.71, 0.9),
+              radius_lo=(0.93, 0.3), turns=(0.5, 1.0), open_prob=(0.0, 0.5),
+              steps_hi=(8, 18), open_from: int = 5) -> tuple[BuildingLevel, ...]:
+    """n levels: riser bands split [riser] evenly (the first key of the difficulty index); the
+    most risers per flight grows, the lower bounds of width, landing depth and spiral radius
+    fall, the spiral turn and the chance of an open side grow linearly from level 1 to level n
+    (open sides from level open_from)."""
+    edges = [round(riser[0] + (riser[1] - riser[0]) * i / n, 3) for i in range(n + 1)]
+    out = []
+    for i in range(n):
+        f = i / max(n - 1, 1)
+
+        def lerp(ab, f=f):
+            return ab[0] + (ab[1] - ab[0]) * f
+        turns_i = np.floor(lerp(turns) * 4 + 1e-9) / 4
+        p_open = 0.0 if i + 1 < open_from else lerp(open_prob)
+        out.append(BuildingLevel(
+            riser=(edges[i], edges[i + 1]), width=(round(lerp(width_lo), 2), 2.0),
+            landing=(round(lerp(landing_lo), 2), 1.8), steps=(3, int(round(lerp(steps_hi)))),
+            inner_radius=(round(lerp(radius_lo), 2), 1.0), max_turns=float(turns_i),
+            open_prob=round(p_open, 3)))
+    return tuple(out)
 
 
 def _table(rows: list[tuple], landing: float = 0.0) -> tuple[Level, ...]:
@@ -109,13 +162,21 @@ _SPIRAL_EXT = _table([
     (0.172, 0.254, 1.34, 17), (0.186, 0.252, 1.12, 16), (0.200, 0.250, 0.90, 15),
 ])
 
-LEVELS: dict[str, dict[str, tuple[Level, ...]]] = {
+# building: risers 2-21 cm in 10 bands of 1.9 cm; extended: 6 bands of 17-21 cm, narrow, open
+_BUILDING_TRAIN = _building(10)
+_BUILDING_EXT = _building(6, riser=(0.17, 0.21), width_lo=(1.0, 0.8), landing_lo=(1.0, 0.9),
+                          radius_lo=(0.5, 0.3), turns=(1.0, 1.0), open_prob=(0.3, 0.5),
+                          steps_hi=(18, 18), open_from=1)
+
+LEVELS: dict[str, dict[str, tuple]] = {
     "pyramid": {"train": _PYRAMID_TRAIN, "test": _PYRAMID_TRAIN, "extended": _PYRAMID_EXT},
     "straight": {"train": _STRAIGHT_TRAIN, "test": _STRAIGHT_TEST, "extended": _STRAIGHT_EXT},
     "l_shaped": {"train": _L_SHAPED_TRAIN, "test": _L_SHAPED_TEST, "extended": _L_SHAPED_EXT},
     "u_shaped": {"train": _U_SHAPED_TRAIN, "test": _U_SHAPED_TEST, "extended": _U_SHAPED_EXT},
     "spiral": {"train": _SPIRAL_TRAIN, "test": _SPIRAL_TEST, "extended": _SPIRAL_EXT},
+    "building": {"train": _BUILDING_TRAIN, "test": _BUILDING_TRAIN, "extended": _BUILDING_EXT},
 }
+PAPER_FAMILIES = ("pyramid", "straight", "l_shaped", "u_shaped", "spiral")
 
 
 def check_family(family: str) -> None:
@@ -131,14 +192,14 @@ def check_schedule(schedule: str) -> None:
                          f"{', '.join(SCHEDULES)}")
 
 
-def levels(family: str, schedule: str = "train") -> tuple[Level, ...]:
+def levels(family: str, schedule: str = "train") -> tuple[Level, ...] | tuple[BuildingLevel, ...]:
     """The levels of ``family`` in ``schedule`` (0-based index = level)."""
     check_family(family)
     check_schedule(schedule)
     return LEVELS[family][schedule]
 
 
-def get_level(family: str, level: int, schedule: str = "train") -> Level:
+def get_level(family: str, level: int, schedule: str = "train") -> Level | BuildingLevel:
     """One level, 0-based; out of range -> ValueError."""
     table = levels(family, schedule)
     if (not isinstance(level, numbers.Integral) or isinstance(level, bool)

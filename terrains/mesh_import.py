@@ -15,10 +15,16 @@ import numpy as np
 import trimesh
 
 from .path import Line, resample
-from .tile import CENTRELINE_POINTS, SPAWN_MARGIN, Tile, quantise, sample_heights
+from .tile import CENTRELINE_POINTS, HEIGHT_QUANTUM, SPAWN_MARGIN, Tile, quantise, sample_heights
 
 IMPORT_FORMATS = (".obj", ".stl", ".glb", ".gltf", ".ply", ".off")
 _CHUNK = 4_000_000  # (triangle, grid point) candidate pairs per batch
+MAX_EXTENT = 200.0  # m; a wider footprint is taken for a mesh in millimetres
+CENTRE_CAP = 1.0    # m, clearance beyond which the route no longer cares
+CENTRE_MIN = 0.05   # m, clearance floor of the cost (bounds it at (CAP/MIN)^POWER per metre)
+CENTRE_POWER = 4.0
+FLAT_PATCH = 0.4    # m, a flat patch holding a disc of this radius is a landing, not a tread
+RISER_SLACK = 1.0   # m, a landing's risers count as this much farther than its walls
 
 
 def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
@@ -101,34 +107,84 @@ def raycast_down(vertices: np.ndarray, faces: np.ndarray, x: np.ndarray, y: np.n
     return out.reshape(ny, nx)
 
 
+def _edges(h: np.ndarray, limit: float) -> np.ndarray:
+    """[ny, nx] bool: points with a 4-neighbour more than ``limit`` higher or lower, and the
+    points on the grid's border (the mesh ends there)."""
+    out = np.zeros(h.shape, bool)
+    bx = np.abs(np.diff(h, axis=1)) > limit
+    by = np.abs(np.diff(h, axis=0)) > limit
+    out[:, 1:] |= bx
+    out[:, :-1] |= bx
+    out[1:] |= by
+    out[:-1] |= by
+    out[[0, -1], :] = True
+    out[:, [0, -1]] = True
+    return out
+
+
+def chamfer_distance(seeds: np.ndarray, resolution: float, cap: float) -> np.ndarray:
+    """Distance (m, 8-neighbour chamfer) from every point to the nearest True of ``seeds``
+    [ny, nx], exact enough for steering, computed up to ``cap`` (farther points get cap)."""
+    d = np.where(seeds, 0.0, np.inf)
+    diag = resolution * np.sqrt(2.0)
+    for _ in range(int(np.ceil(cap / resolution)) + 2):
+        new = d.copy()
+        np.minimum(new[1:], d[:-1] + resolution, out=new[1:])
+        np.minimum(new[:-1], d[1:] + resolution, out=new[:-1])
+        np.minimum(new[:, 1:], d[:, :-1] + resolution, out=new[:, 1:])
+        np.minimum(new[:, :-1], d[:, 1:] + resolution, out=new[:, :-1])
+        np.minimum(new[1:, 1:], d[:-1, :-1] + diag, out=new[1:, 1:])
+        np.minimum(new[:-1, :-1], d[1:, 1:] + diag, out=new[:-1, :-1])
+        np.minimum(new[1:, :-1], d[:-1, 1:] + diag, out=new[1:, :-1])
+        np.minimum(new[:-1, 1:], d[1:, :-1] + diag, out=new[:-1, 1:])
+        if np.array_equal(new, d):
+            break
+        d = new
+    return np.minimum(d, cap)
+
+
+def clearance(heights: np.ndarray, resolution: float, max_step: float) -> np.ndarray:
+    """[ny, nx] m: on large flat patches the distance to the patch's edge, elsewhere the distance
+    to the nearest impassable edge (see the module docstring), capped at CENTRE_CAP."""
+    d, _, _ = _fields(heights, resolution, max_step)
+    return d
+
+
+def _fields(heights: np.ndarray, resolution: float, max_step: float):
+    """(clearance, d_flat, large): see clearance(); d_flat [ny, nx] distance to the nearest
+    height change; large [ny, nx] bool on flat patches holding a disc of radius FLAT_PATCH."""
+    h = np.asarray(heights, np.float64)
+    d_wall = chamfer_distance(_edges(h, max_step), resolution, CENTRE_CAP)
+    d_flat = chamfer_distance(_edges(h, HEIGHT_QUANTUM / 2), resolution, CENTRE_CAP)
+    large = d_flat >= FLAT_PATCH - 1e-9
+    for _ in range(int(np.ceil(1.5 * FLAT_PATCH / resolution))):   # grow over the patch
+        g = large.copy()
+        g[1:] |= large[:-1] & (h[1:] == h[:-1])
+        g[:-1] |= large[1:] & (h[:-1] == h[1:])
+        g[:, 1:] |= large[:, :-1] & (h[:, 1:] == h[:, :-1])
+        g[:, :-1] |= large[:, 1:] & (h[:, :-1] == h[:, 1:])
+        if np.array_equal(g, large):
+            break
+        large = g
+    return np.where(large, np.minimum(d_wall, d_flat + RISER_SLACK), d_wall), d_flat, large
+
+
+def centring_cost(heights: np.ndarray, resolution: float, max_step: float) -> np.ndarray:
+    """[ny, nx] cost per metre, >= 1: (CENTRE_CAP / clearance) ** CENTRE_POWER."""
+    d = np.clip(clearance(heights, resolution, max_step), CENTRE_MIN, CENTRE_CAP)
+    return (CENTRE_CAP / d) ** CENTRE_POWER
+
+
 def walk_distance(heights: np.ndarray, resolution: float, start_ij: tuple[int, int],
-                  max_step: float, clearance: float = 0.4) -> tuple[np.ndarray, np.ndarray]:
-    """Shortest walking distance from grid point start_ij = (iy, ix) over 8-neighbours whose
-    heights differ by at most ``max_step``; steps within ``clearance`` of an impassable edge cost
-    up to 3x. Returns (dist [ny, nx], inf where unreachable; parent move index [ny, nx])."""
+                  max_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cheapest walking path cost from grid point start_ij = (iy, ix) over 8-neighbours whose
+    heights differ by at most ``max_step``, each step costing its length times the mean
+    centring_cost of its ends. Returns (cost [ny, nx], inf where unreachable; parent move index
+    [ny, nx])."""
     h = np.asarray(heights, np.float64)
     ny, nx = h.shape
     moves = [(0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)]
-    # points next to an impassable 4-neighbour step, then grown to the clearance
-    block = np.zeros((ny, nx), bool)
-    bx = np.abs(np.diff(h, axis=1)) > max_step
-    by = np.abs(np.diff(h, axis=0)) > max_step
-    block[:, 1:] |= bx
-    block[:, :-1] |= bx
-    block[1:] |= by
-    block[:-1] |= by
-    near = np.zeros((ny, nx))
-    grown = block.copy()
-    steps = max(int(round(clearance / resolution)), 1)
-    for s in range(steps):
-        near[grown & (near == 0)] = 1.0 - s / steps
-        g = grown.copy()
-        g[1:] |= grown[:-1]
-        g[:-1] |= grown[1:]
-        g[:, 1:] |= grown[:, :-1]
-        g[:, :-1] |= grown[:, 1:]
-        grown = g
-    cost = resolution * (1.0 + 2.0 * near)
+    cost = resolution * centring_cost(h, resolution, max_step)
     dist = np.full((ny, nx), np.inf)
     parent = np.full((ny, nx), -1, np.int8)
     dist[start_ij] = 0.0
@@ -166,6 +222,85 @@ def _trace(parent: np.ndarray, goal_ij: tuple[int, int]) -> np.ndarray:
     return np.array(out[::-1])
 
 
+def _patch(seed_ij: tuple[int, int], h: np.ndarray, large: np.ndarray) -> np.ndarray:
+    """[ny, nx] bool: the large flat patch of equal height holding ``seed_ij``."""
+    z = h[seed_ij]
+    ok = large & (h == z)
+    m = np.zeros(h.shape, bool)
+    m[seed_ij] = True
+    while True:
+        g = m.copy()
+        g[1:] |= m[:-1]
+        g[:-1] |= m[1:]
+        g[:, 1:] |= m[:, :-1]
+        g[:, :-1] |= m[:, 1:]
+        g &= ok
+        if np.array_equal(g, m):
+            return m
+        m = g
+
+
+def through_landings(cells: np.ndarray, h: np.ndarray, d_flat: np.ndarray, large: np.ndarray,
+                     resolution: float, clear: np.ndarray | None = None) -> list[np.ndarray]:
+    """Route cells [m, 2] (iy, ix) -> list of [k, 2] xy pieces, where every run of cells on one
+    large flat patch becomes entry -> nearest ridge point -> ridge point nearest the exit -> exit
+    (the ridge: the points within a grid step of the largest d_flat among the patch's points
+    within 2 CENTRE_CAP of the run, so that a ring-shaped floor is not left for its corners).
+    A run stays as searched if the pieces would leave the patch or come closer to a wall than
+    0.8 x the run's closest approach (``clear``: the clearance field; the margin covers the
+    chamfer metric's error), e.g. across a curved landing."""
+    out, i, m = [], 0, len(cells)
+    xy = cells[:, ::-1] * resolution
+    while i < m:
+        ij = tuple(cells[i])
+        if not large[ij]:
+            out.append(xy[i:i + 1])
+            i += 1
+            continue
+        patch = _patch(ij, h, large)
+        j = i
+        while j + 1 < m and patch[tuple(cells[j + 1])]:
+            j += 1
+        run = np.zeros(h.shape, bool)
+        run[cells[i:j + 1, 0], cells[i:j + 1, 1]] = True
+        local = patch & (chamfer_distance(run, resolution, 2 * CENTRE_CAP) < 2 * CENTRE_CAP)
+        top = d_flat[local].max()
+        ridge = np.argwhere(local & (d_flat >= top - 0.75 * resolution))[:, ::-1] * resolution
+        e, x = xy[i], xy[j]
+        re = ridge[np.argmin(np.hypot(*(ridge - e).T))]
+        rx = ridge[np.argmin(np.hypot(*(ridge - x).T))]
+        piece = np.array([e, re, rx, x])
+        closest = 0.0 if clear is None else clear[cells[i:j + 1, 0], cells[i:j + 1, 1]].min()
+        if _on_patch(piece, patch, resolution) and (
+                clear is None or _min_on(piece, clear, resolution) >= 0.8 * closest):
+            out.append(piece)
+        else:
+            out.append(xy[i:j + 1])
+        i = j + 1
+    return out
+
+
+def _min_on(piece: np.ndarray, field: np.ndarray, resolution: float) -> float:
+    """Smallest value of ``field`` at the grid points nearest the polyline [k, 2]."""
+    pts = []
+    for a, b in zip(piece[:-1], piece[1:], strict=True):
+        n = max(int(np.ceil(np.hypot(*(b - a)) / (resolution / 2))), 1)
+        pts.append(a + (b - a) * (np.arange(n + 1) / n)[:, None])
+    ij = np.round(np.concatenate(pts)[:, ::-1] / resolution).astype(int)
+    return float(field[ij[:, 0], ij[:, 1]].min())
+
+
+def _on_patch(piece: np.ndarray, patch: np.ndarray, resolution: float) -> bool:
+    """Whether the polyline [k, 2] stays on ``patch`` (sampled every quarter grid step)."""
+    for a, b in zip(piece[:-1], piece[1:], strict=True):
+        n = max(int(np.ceil(np.hypot(*(b - a)) / (resolution / 4))), 1)
+        p = a + (b - a) * (np.arange(n + 1) / n)[:, None]
+        ij = np.round(p[:, ::-1] / resolution).astype(int)
+        if not patch[ij[:, 0], ij[:, 1]].all():
+            return False
+    return True
+
+
 def _simplify(pts: np.ndarray, tol: float) -> np.ndarray:
     """Ramer-Douglas-Peucker on [m, 2] points."""
     if len(pts) < 3:
@@ -195,6 +330,11 @@ def import_mesh(path: str | os.PathLike, start: tuple[float, float], goal: tuple
     path = os.fspath(path)
     mesh = load_mesh(path)
     lo, hi = mesh.bounds[0], mesh.bounds[1]
+    ext = hi - lo
+    if max(ext[0], ext[1]) > MAX_EXTENT:
+        raise ValueError(f"{path}: footprint {ext[0]:g} x {ext[1]:g} units is wider than "
+                         f"{MAX_EXTENT:g} m: the mesh looks like millimetres; scale it by 0.001 "
+                         f"(metres, z up)")
     o = np.asarray(lo[:2] + resolution / 2 if origin is None else origin, np.float64)
     nx = int(np.floor((hi[0] - o[0]) / resolution + 1e-6)) + 1
     ny = int(np.floor((hi[1] - o[1]) / resolution + 1e-6)) + 1
@@ -215,11 +355,15 @@ def import_mesh(path: str | os.PathLike, start: tuple[float, float], goal: tuple
     s_ij, g_ij = grid_index(start, "start"), grid_index(goal, "goal")
     dist, parent = walk_distance(h, resolution, s_ij, max_step)
     if not np.isfinite(dist[g_ij]):
-        raise ValueError(f"{path}: goal {tuple(goal)} cannot be reached from start {tuple(start)} "
-                         f"stepping at most {max_step} m")
-    cells = _trace(parent, g_ij)[:, ::-1] * resolution          # [m, 2] tile-frame xy
+        raise ValueError(f"{path}: no walkable route: goal {tuple(goal)} cannot be reached from "
+                         f"start {tuple(start)} stepping at most {max_step} m")
+    clear, d_flat, large = _fields(h, resolution, max_step)
+    pieces = through_landings(_trace(parent, g_ij), h.astype(np.float64), d_flat, large,
+                              resolution, clear)
+    cells = np.concatenate(pieces)                               # [m, 2] tile-frame xy
     s_xy, g_xy = np.asarray(start, float) - o, np.asarray(goal, float) - o
-    pts = _simplify(np.concatenate([[s_xy], cells[1:-1], [g_xy]]), resolution)
+    pts = _simplify(np.concatenate([[s_xy], cells[1:-1], [g_xy]]), resolution / 2)
+    pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
     xy = resample([Line(tuple(p), tuple(q)) for p, q in zip(pts[:-1], pts[1:], strict=True)],
                   CENTRELINE_POINTS)
     z = sample_heights(h, resolution, xy[:, 0], xy[:, 1])
@@ -234,7 +378,7 @@ def import_mesh(path: str | os.PathLike, start: tuple[float, float], goal: tuple
                 variant=os.path.splitext(os.path.basename(path))[0],
                 walls=~np.isfinite(dist),
                 spec=dict(source=path, origin=o.tolist(), max_step=max_step,
-                          path_length=float(dist[g_ij])))
+                          path_length=float(np.hypot(*np.diff(pts, axis=0).T).sum())))
 
 
 def _flat_half(h: np.ndarray, resolution: float, ij: tuple[int, int]) -> float:

@@ -26,7 +26,8 @@ def render_tile(tile: Tile, path: str | os.PathLike, size_px: int = 600,
     dpi = 100
     fig, ax = plt.subplots(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
     ls = LightSource(azdeg=315, altdeg=40)
-    walk_top = tile.goal_height if not tile.walls.any() else float(h[~tile.walls].max())
+    walk_top = (max(tile.goal_height, tile.floor_height) if not tile.walls.any()
+                else float(h[~tile.walls].max()))
     vmax = max(walk_top, 1e-3) * 1.15
     cmap = plt.get_cmap("viridis")
     rgb = ls.shade(np.clip(h, 0, vmax), cmap=cmap, vert_exag=3.0, dx=res, dy=res,
@@ -45,9 +46,10 @@ def render_tile(tile: Tile, path: str | os.PathLike, size_px: int = 600,
     spec = tile.spec
     if title is None and tile.family == "imported":
         title = f"imported {tile.variant}  rise {tile.goal_height - tile.floor_height:.2f} m"
-    label = title or (f"{tile.family} {tile.variant}  level {tile.level + 1} "
+    rise = abs(tile.goal_height - tile.floor_height)
+    label = title or (f"{tile.family} {tile.variant} {tile.direction}  level {tile.level + 1} "
                       f"({spec.get('schedule', '?')})  riser {spec.get('riser', 0) * 100:.1f} cm"
-                      f"  rise {tile.goal_height:.2f} m")
+                      f"  rise {rise:.2f} m")
     ax.set_title(label, fontsize=9)
     ax.set_xlabel("x (m)", fontsize=8)
     ax.set_ylabel("y (m)", fontsize=8)

@@ -22,6 +22,8 @@ DEFAULT_TILE_SIZE = 10.0    # m, side of a square tile
 WALL_RISE = 0.8             # m, walls stand this much above the highest walking surface of a tile
 SPAWN_MARGIN = 0.35         # m, spawn rectangle clearance from walls, risers and edges
 GOAL_FLAT_RADIUS = 0.35     # m, the terrain is flat (goal height) within this radius of the goal
+DIRECTIONS = ("up", "down")
+MAX_SPAWN_HALF = 0.5        # m, largest half-size of a spawn square searched on the grid
 
 
 def quantise(h: np.ndarray) -> np.ndarray:
@@ -46,6 +48,8 @@ class Tile:
     family, level (0-based), variant: where the tile comes from.
     walls:        [ny, nx] bool, True on walls (not walkable).
     spec:         dict of the dimensions the tile was built from (riser, tread, width, steps, ...).
+    direction:    "up" (spawn at the foot, goal on the top landing) or "down" (the same heights,
+                  spawn on the top landing, goal at the foot, centre-line reversed): reversed().
     """
 
     heights: np.ndarray
@@ -60,8 +64,12 @@ class Tile:
     variant: str
     walls: np.ndarray = field(default=None)  # type: ignore[assignment]
     spec: dict = field(default_factory=dict)
+    direction: str = "up"
 
     def __post_init__(self):
+        if self.direction not in DIRECTIONS:
+            raise ValueError(f"unknown direction {self.direction!r}; known: "
+                             f"{', '.join(DIRECTIONS)}")
         h = np.asarray(self.heights, np.float32)
         if h.ndim != 2 or min(h.shape) < 2:
             raise ValueError(f"Tile.heights must be a 2-D grid of at least 2x2, got {h.shape}")
@@ -84,12 +92,47 @@ class Tile:
         """Bilinear terrain height at tile-frame points x, y (any equal shapes)."""
         return sample_heights(self.heights, self.resolution, x, y)
 
+    def reversed(self) -> Tile:
+        """The same staircase walked the other way (same heights and walls): spawn where the goal
+        was, facing back down (or up) the route; goal at the old spawn centre, facing away from
+        the stairs; centre-line reversed. The spawn area is the flat landing around the old goal
+        (``spec["top_spawn"]`` where the generator knows it, else the largest flat, wall-free
+        square with SPAWN_MARGIN around the goal, up to MAX_SPAWN_HALF). Twice reversed is the
+        tile itself (as long as the spawn area is what the generator recorded)."""
+        spec = dict(self.spec)
+        back = spec.pop("reverse_spawn", None)         # kept so that reversing twice round-trips
+        if back is None:
+            top = spec.get("top_spawn")
+            if top is None:
+                half = flat_half(self.heights, self.walls, self.resolution, self.goal[:2])
+                top = [self.goal[0], self.goal[1], half, half]
+            back = [float(top[0]), float(top[1]), float(top[2]), float(top[3])]
+        x, y, z, hx, hy, yaw, yaw_half = (float(v) for v in self.spawn)
+        spec["reverse_spawn"] = [x, y, hx, hy]
+        gx, gy, gz, gyaw = (float(v) for v in self.goal)
+        spawn = [back[0], back[1], gz, back[2], back[3], _wrap(gyaw + np.pi), yaw_half]
+        goal = [x, y, self.floor_height, _wrap(yaw + np.pi)]
+        line = self.centreline
+        distinct = len(line) - _trailing_repeats(line)
+        rev = line[:distinct][::-1]
+        rev = np.concatenate([rev, np.repeat(rev[-1:], len(line) - distinct, 0)], 0)
+        return Tile(heights=self.heights, resolution=self.resolution, spawn=spawn, goal=goal,
+                    centreline=rev, floor_height=self.goal_height, goal_height=self.floor_height,
+                    family=self.family, level=self.level, variant=self.variant, walls=self.walls,
+                    spec=spec, direction="down" if self.direction == "up" else "up")
+
+    def with_direction(self, direction: str) -> Tile:
+        """This tile walked ``direction`` ("up" or "down")."""
+        if direction not in DIRECTIONS:
+            raise ValueError(f"unknown direction {direction!r}; known: {', '.join(DIRECTIONS)}")
+        return self if direction == self.direction else self.reversed()
+
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> None:
         """Write the tile to one .npz (atomically: temporary file, then os.replace)."""
         meta = dict(resolution=self.resolution, floor_height=self.floor_height,
                     goal_height=self.goal_height, family=self.family, level=int(self.level),
-                    variant=self.variant, spec=self.spec)
+                    variant=self.variant, spec=self.spec, direction=self.direction)
         atomic_savez(path, kind=np.array("tile"), heights=self.heights, spawn=self.spawn,
                      goal=self.goal, centreline=self.centreline, walls=self.walls,
                      meta=np.array(json.dumps(meta, default=_json_default)))
@@ -105,7 +148,8 @@ class Tile:
                        floor_height=float(meta["floor_height"]),
                        goal_height=float(meta["goal_height"]), family=str(meta["family"]),
                        level=int(meta["level"]), variant=str(meta["variant"]),
-                       walls=data["walls"], spec=dict(meta.get("spec", {})))
+                       walls=data["walls"], spec=dict(meta.get("spec", {})),
+                       direction=str(meta.get("direction", "up")))
         except (KeyError, ValueError, TypeError) as e:
             raise ValueError(f"{path}: not a valid tile file ({e})") from None
 
@@ -125,6 +169,36 @@ def sample_heights(heights: np.ndarray, resolution: float, x, y) -> np.ndarray:
     h00, h01 = h[iy, ix], h[iy, ix + 1]
     h10, h11 = h[iy + 1, ix], h[iy + 1, ix + 1]
     return (h00 * (1 - wx) + h01 * wx) * (1 - wy) + (h10 * (1 - wx) + h11 * wx) * wy
+
+
+def _wrap(a: float) -> float:
+    return float(np.arctan2(np.sin(a), np.cos(a)))
+
+
+def _trailing_repeats(line: np.ndarray) -> int:
+    """How many points at the end of ``line`` [K, d] repeat the one before them."""
+    k = 0
+    while k < len(line) - 1 and np.array_equal(line[-1 - k], line[-2 - k]):
+        k += 1
+    return k
+
+
+def flat_half(heights: np.ndarray, walls: np.ndarray, resolution: float, xy) -> float:
+    """Largest half-size (m, multiple of the resolution, <= MAX_SPAWN_HALF) of an axis-aligned
+    square around ``xy`` that, grown by SPAWN_MARGIN, lies on the grid, is flat and has no wall;
+    0 if none."""
+    i, j = int(round(xy[1] / resolution)), int(round(xy[0] / resolution))
+    best = 0.0
+    for half in np.arange(resolution, MAX_SPAWN_HALF + 1e-9, resolution):
+        r = int(np.floor((half + SPAWN_MARGIN) / resolution + 1e-6))
+        if i - r < 0 or j - r < 0:
+            break
+        win = heights[i - r:i + r + 1, j - r:j + r + 1]
+        if (win.shape != (2 * r + 1, 2 * r + 1) or np.ptp(win) > 0
+                or walls[i - r:i + r + 1, j - r:j + r + 1].any()):
+            break
+        best = float(half)
+    return best
 
 
 # ---------------------------------------------------------------------- npz helpers

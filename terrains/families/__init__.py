@@ -1,16 +1,18 @@
 """The stair families and ``make_tile``: one module per family.
 
 Each family module has VARIANTS and either ``layout(level, variant) -> (Layout, transform)``
-(stairs with walls, centred in the tile by common.build_tile) or ``make(...) -> Tile`` (pyramid).
+(stairs with walls, centred in the tile by common.build_tile) or ``make(...) -> Tile`` (pyramid;
+building, which also takes ``seed=`` and ``schedule=`` and samples a staircase per tile).
+Every tile can be walked "up" (the default) or "down" (Tile.reversed(): same heights).
 """
 
 from __future__ import annotations
 
 from types import ModuleType
 
-from ..levels import check_family, get_level
+from ..levels import PAPER_FAMILIES, check_family, get_level
 from ..tile import DEFAULT_RESOLUTION, DEFAULT_TILE_SIZE, Tile
-from . import l_shaped, pyramid, spiral, straight, u_shaped
+from . import building, l_shaped, pyramid, spiral, straight, u_shaped
 from .common import build_tile
 
 FAMILIES: dict[str, ModuleType] = {
@@ -19,7 +21,12 @@ FAMILIES: dict[str, ModuleType] = {
     "l_shaped": l_shaped,
     "u_shaped": u_shaped,
     "spiral": spiral,
+    "building": building,
 }
+assert tuple(FAMILIES)[:len(PAPER_FAMILIES)] == PAPER_FAMILIES
+
+
+__all__ = ["FAMILIES", "PAPER_FAMILIES", "make_tile", "variants"]
 
 
 def variants(family: str) -> tuple[str, ...]:
@@ -30,9 +37,13 @@ def variants(family: str) -> tuple[str, ...]:
 
 def make_tile(family: str, level: int, variant: str | None = None, schedule: str = "train",
               resolution: float = DEFAULT_RESOLUTION,
-              tile_size: float = DEFAULT_TILE_SIZE) -> Tile:
+              tile_size: float = DEFAULT_TILE_SIZE, direction: str = "up",
+              seed: int = 0) -> Tile:
     """One tile of ``family`` at 0-based ``level`` of ``schedule``: heights [n, n],
-    n = tile_size / resolution. ``variant`` None -> the family's first variant."""
+    n = tile_size / resolution. ``variant`` None -> the family's first variant.
+    ``direction`` "down": the same tile walked from the top landing to the foot.
+    ``seed``: which of the staircases sampled for (level, variant) (building only; the other
+    families are deterministic and ignore it)."""
     check_family(family)
     lv = get_level(family, level, schedule)
     mod = FAMILIES[family]
@@ -41,10 +52,12 @@ def make_tile(family: str, level: int, variant: str | None = None, schedule: str
         raise ValueError(f"unknown variant {variant!r} for {family!r}; known variants: "
                          f"{', '.join(mod.VARIANTS)}")
     level = int(level)
-    if hasattr(mod, "make"):
+    if getattr(mod, "SEEDED", False):
+        tile = mod.make(lv, level, variant, resolution, tile_size, seed=seed, schedule=schedule)
+    elif hasattr(mod, "make"):
         tile = mod.make(lv, level, variant, resolution, tile_size)
     else:
         lay, how = mod.layout(lv, variant)
         tile = build_tile(lay, how, family, level, variant, resolution, tile_size)
     tile.spec["schedule"] = schedule
-    return tile
+    return tile.with_direction(direction)

@@ -104,6 +104,8 @@ class Layout:
     floor_height, goal_height: m.
     flights:     dicts describing each flight (canonical frame), see tile.spec["flights"].
     spec:        dimensions for tile.spec.
+    top_rect:    (x0, x1, y0, y1) the flat top landing, axis-aligned, or None; the spawn area of
+                 the descending tile is it shrunk by SPAWN_MARGIN (None: searched on the grid).
     """
 
     regions: list[Region]
@@ -117,6 +119,7 @@ class Layout:
     flights: list[dict] = field(default_factory=list)
     spec: dict = field(default_factory=dict)
     spawn_yaw_half_range: float = np.pi / 4
+    top_rect: tuple[float, float, float, float] | None = None
 
 
 # ------------------------------------------------------------------ variant transforms
@@ -146,6 +149,12 @@ def _map_yaw(yaw: float, how: str) -> float:
     return float(np.arctan2(np.sin(yaw), np.cos(yaw)))
 
 
+def footprint(layout: Layout, resolution: float) -> float:
+    """Side (m) of the smallest square tile that holds ``layout`` and its walls."""
+    lo, hi = layout.outline.min(0), layout.outline.max(0)
+    return float((hi - lo).max()) + 2 * max(MIN_WALL, 2 * resolution)
+
+
 def check_grid(resolution: float, tile_size: float) -> int:
     """Validate resolution and tile size; returns points per side, round(tile_size/resolution)."""
     if not (0 < resolution <= MAX_RESOLUTION):
@@ -163,7 +172,7 @@ def build_tile(layout: Layout, how: str, family: str, level: int, variant: str,
     and paint it: [n, n] heights, walls at WALL_RISE above the highest walking point."""
     n = check_grid(resolution, tile_size)
     lo, hi = layout.outline.min(0), layout.outline.max(0)
-    need = float((hi - lo).max()) + 2 * max(MIN_WALL, 2 * resolution)
+    need = footprint(layout, resolution)
     if need > tile_size + 1e-9:
         raise ValueError(f"{family} level {level + 1} does not fit a {tile_size} m tile: it needs "
                          f"{need:.2f} m (staircase plus walls); use a larger tile_size")
@@ -208,6 +217,11 @@ def build_tile(layout: Layout, how: str, family: str, level: int, variant: str,
     flights = [_map_flight(f, to_tile, how) for f in layout.flights]
     spec = dict(layout.spec, flights=flights, wall_height=float(top + WALL_RISE),
                 tile_size=tile_size)
+    if layout.top_rect is not None:   # spawn area of the descending tile: [x, y, half_x, half_y]
+        x0, x1, y0, y1 = layout.top_rect
+        c = to_tile(np.array([[x0, y0], [x1, y1]]))
+        spec["top_spawn"] = [float(v) for v in (*c.mean(0), (x1 - x0) / 2 - SPAWN_MARGIN,
+                                                (y1 - y0) / 2 - SPAWN_MARGIN)]
     return Tile(heights=heights, resolution=resolution, spawn=spawn, goal=goal,
                 centreline=centreline, floor_height=float(layout.floor_height),
                 goal_height=float(layout.goal_height), family=family, level=level,
@@ -221,8 +235,9 @@ def _map_flight(f: dict, to_tile, how: str) -> dict:
     for key in ("start", "centre"):
         if key in f:
             out[key] = [float(v) for v in to_tile(np.array([f[key]]))[0]]
-    if "dir" in f:
-        out["dir"] = [float(v) for v in _map_dir(*f["dir"], how)]
+    for key in ("dir", "open_dir"):
+        if key in f:
+            out[key] = [float(v) for v in _map_dir(*f[key], how)]
     if "theta0" in f:  # arc: angles about the centre
         th0, sweep = f["theta0"], f["sweep"]
         if how == "mirror":
@@ -230,6 +245,9 @@ def _map_flight(f: dict, to_tile, how: str) -> dict:
         elif how == "turn":
             th0 = th0 + np.pi
         out["theta0"], out["sweep"] = float(th0), float(sweep)
+    if "walk" in f:  # angles of the walking line's ends on the arc
+        sign, shift = (-1.0, 0.0) if how == "mirror" else (1.0, np.pi if how == "turn" else 0.0)
+        out["walk"] = [float(sign * a + shift) for a in f["walk"]]
     return out
 
 

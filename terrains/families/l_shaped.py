@@ -37,7 +37,7 @@ def layout(lv: Level, variant: str) -> tuple[Layout, str]:
         regions=regions, outline=np.array([[0, 0], [xl + depth, yt + TOP_LENGTH]]),
         spawn_rect=(0, xs, 0, w), spawn_yaw=0.0, goal=goal,
         path=[line((xs / 2, w / 2), corner), line(corner, goal[:2])],
-        floor_height=0.0, goal_height=top,
+        floor_height=0.0, goal_height=top, top_rect=(x2, x2 + w, yt, yt + TOP_LENGTH),
         flights=[dict(kind="straight", start=[xs, w / 2], dir=[1.0, 0.0], n=n, base=0.0, width=w),
                  dict(kind="straight", start=[x2 + w / 2, w], dir=[0.0, 1.0], n=n, base=mid,
                       width=w)],

@@ -26,6 +26,7 @@ def layout(lv: Level, variant: str) -> tuple[Layout, str]:
         regions=regions, outline=np.array([[0, 0], [xt + TOP_LENGTH, w]]),
         spawn_rect=(0, xs, 0, w), spawn_yaw=0.0, goal=goal,
         path=[line((xs / 2, w / 2), goal[:2])], floor_height=0.0, goal_height=top,
+        top_rect=(xt, xt + TOP_LENGTH, 0, w),
         flights=[dict(kind="straight", start=[xs, w / 2], dir=[1.0, 0.0], n=n, base=0.0,
                       width=w)],
         spec=dict(riser=r, tread=t, width=w, steps=n, total_rise=top))

@@ -37,7 +37,7 @@ def layout(lv: Level, variant: str) -> tuple[Layout, str]:
         regions=regions, outline=np.array([[0, 0], [xl + depth, y2 + w]]),
         spawn_rect=(0, xs, 0, w), spawn_yaw=0.0, goal=goal,
         path=[line(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)],
-        floor_height=0.0, goal_height=top,
+        floor_height=0.0, goal_height=top, top_rect=(0, xs, y2, y2 + w),
         flights=[dict(kind="straight", start=[xs, w / 2], dir=[1.0, 0.0], n=n, base=0.0, width=w),
                  dict(kind="straight", start=[xl, y2 + w / 2], dir=[-1.0, 0.0], n=n, base=mid,
                       width=w)],

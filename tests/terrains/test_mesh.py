@@ -14,7 +14,7 @@ from terrains.mesh_import import import_mesh, load_mesh, raycast_down
 RES = 0.05
 
 
-@pytest.mark.parametrize("family", list(terrains.FAMILIES))
+@pytest.mark.parametrize("family", list(terrains.PAPER_FAMILIES))
 def test_mesh_is_closed_with_vertical_risers(family):
     t = terrains.make_tile(family, 6, terrains.variants(family)[-1], resolution=RES)
     m = heights_to_mesh(t.heights, t.resolution)

@@ -19,7 +19,7 @@ from .measure import (
     walkable,
 )
 
-CASES = [(f, s, i, v) for f in terrains.FAMILIES for s in ("train", "test", "extended")
+CASES = [(f, s, i, v) for f in terrains.PAPER_FAMILIES for s in ("train", "test", "extended")
          for i in range(len(terrains.levels(f, s))) for v in terrains.variants(f)]
 STAIRS = [c for c in CASES if c[0] != "pyramid"]
 

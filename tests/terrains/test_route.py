@@ -1,0 +1,96 @@
+"""The importer's route: in the middle of the walkable width, within 0.15 m (Hausdorff) of the
+procedural centre-line on every family's exported test levels 3 and 6; bad input -> one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import terrains
+from terrains.mesh import export_tile
+from terrains.mesh_import import import_mesh
+
+RES = 0.05
+CASES = [(f, lvl, v) for f in terrains.PAPER_FAMILIES for lvl in (2, 5)
+         for v in terrains.variants(f)[:1]]
+CASES += [("building", lvl, v) for lvl in (2, 5)
+          for v in ("straight", "l_right", "u_left", "switchback_right")]
+
+
+def dense(c: np.ndarray, step: float = 0.01) -> np.ndarray:
+    out = [c[:1]]
+    for a, b in zip(c[:-1], c[1:], strict=True):
+        m = max(int(np.ceil(np.hypot(*(b - a)) / step)), 1)
+        out.append(a + (b - a) * (np.arange(1, m + 1) / m)[:, None])
+    return np.concatenate(out)
+
+
+def hausdorff(a: np.ndarray, b: np.ndarray) -> float:
+    """Hausdorff distance between two polylines [m, 2], [k, 2] (densified to 1 cm)."""
+    a, b = dense(np.asarray(a, float)), dense(np.asarray(b, float))
+    d = np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
+    return float(max(d.min(1).max(), d.min(0).max()))
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c[0]}-test{c[1] + 1}-{c[2]}")
+def test_imported_route_follows_the_procedural_centreline(case, tmp_path):
+    fam, lvl, v = case
+    t = terrains.make_tile(fam, lvl, v, schedule="test", resolution=RES)
+    path = tmp_path / "stairs.stl"
+    export_tile(t, path)
+    back = import_mesh(path, t.spawn[:2], t.goal[:2], resolution=RES)
+    route = back.centreline[:, :2] + np.asarray(back.spec["origin"])
+    assert hausdorff(route, t.centreline[:, :2]) <= 0.15
+
+
+def test_route_is_centred_in_a_corridor_and_turns_mid_landing(tmp_path):
+    """A U of 1.2 m flights: the route runs on the flights' middle lines and crosses the 1.0 m
+    landing on its middle line, not round the end of the dividing wall."""
+    s = terrains.Staircase("u", 0.15, 0.28, 1.2, (6, 6), landing=1.0)
+    t = terrains.staircase_tile(s, RES)
+    export_tile(t, tmp_path / "u.obj")
+    back = import_mesh(tmp_path / "u.obj", t.spawn[:2], t.goal[:2], resolution=RES)
+    route = dense(back.centreline[:, :2].astype(float) + np.asarray(back.spec["origin"]))
+    fl = t.spec["flights"]
+    x_mid = fl[0]["start"][0] + (fl[0]["n"] - 1) * s.tread + s.landing / 2
+    y1, y2 = fl[0]["start"][1], fl[1]["start"][1]
+    on_landing = (route[:, 1] > y1 + 2 * RES) & (route[:, 1] < y2 - 2 * RES)   # crossing it
+    assert on_landing.sum() > 10 and np.abs(route[on_landing, 0] - x_mid).max() <= 2 * RES
+    on_flight = np.abs(route[:, 0] - (fl[0]["start"][0] + 0.5)) < RES
+    ys = route[on_flight, 1]
+    assert np.min(np.abs(ys[:, None] - np.array([fl[0]["start"][1], fl[1]["start"][1]])),
+                  axis=1).max() <= RES
+
+
+def _one_line(exc) -> str:
+    msg = str(exc.value)
+    assert "\n" not in msg
+    return msg
+
+
+def test_bad_inputs_one_line_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothere.stl: no such mesh file") as e:
+        import_mesh(tmp_path / "nothere.stl", (0, 0), (1, 1))
+    _one_line(e)
+    # a floor with a tower: the goal on the tower cannot be reached
+    floor = trimesh.creation.box((3, 3, 0.2))
+    tower = trimesh.creation.box((0.6, 0.6, 2.0))
+    tower.apply_translation((0.8, 0.8, 1.0))
+    mesh = trimesh.util.concatenate([floor, tower])
+    mesh.export(tmp_path / "tower.stl")
+    with pytest.raises(ValueError, match="tower.stl: no walkable route") as e:
+        import_mesh(tmp_path / "tower.stl", (-1.0, -1.0), (0.8, 0.8), resolution=RES)
+    _one_line(e)
+    with pytest.raises(ValueError, match=r"tower.stl: start \(9.0, 9.0\) lies outside") as e:
+        import_mesh(tmp_path / "tower.stl", (9.0, 9.0), (0.0, 0.0), resolution=RES)
+    _one_line(e)
+    # the same staircase in millimetres
+    t = terrains.make_tile("straight", 3, resolution=0.1)
+    export_tile(t, tmp_path / "mm.stl")
+    mm = trimesh.load(tmp_path / "mm.stl", force="mesh")
+    mm.apply_scale(1000.0)
+    mm.export(tmp_path / "mm.stl")
+    with pytest.raises(ValueError, match="mm.stl: .*looks like millimetres") as e:
+        import_mesh(tmp_path / "mm.stl", t.spawn[:2] * 1000, t.goal[:2] * 1000)
+    _one_line(e)
