@@ -113,8 +113,8 @@ def test_height_map_matches_numpy_reference(env, atlas):
     )
     yaw = rng.uniform(-np.pi, np.pi, 16)
     got = np.asarray(
-        jax.jit(jax.vmap(env.height_map))(
-            jnp.asarray(pos, jnp.float32), jnp.asarray(yaw, jnp.float32)
+        jax.jit(jax.vmap(env.height_map, in_axes=(0, 0, None)))(
+            jnp.asarray(pos, jnp.float32), jnp.asarray(yaw, jnp.float32), t
         )
     )
     hm = env.config.height_map
@@ -122,8 +122,9 @@ def test_height_map_matches_numpy_reference(env, atlas):
     gx, gy = np.meshgrid(np.linspace(-half, half, hm.size), np.linspace(-half, half, hm.size))
     for i in range(16):
         c, s = np.cos(yaw[i]), np.sin(yaw[i])
-        wx = pos[i, 0] + c * gx - s * gy
-        wy = pos[i, 1] + s * gx + c * gy
+        extent = (atlas.tile_points - 1) * atlas.resolution  # the map reads this tile alone
+        wx = np.clip(pos[i, 0] + c * gx - s * gy, ox, ox + extent)
+        wy = np.clip(pos[i, 1] + s * gx + c * gy, oy, oy + extent)
         ref = terrains.sample_heights(atlas.heights, atlas.resolution, wx, wy)
         ref = np.clip(pos[i, 2] - ref - hm.offset, -hm.clip, hm.clip).ravel()
         np.testing.assert_allclose(got[i], ref, atol=2e-4)
