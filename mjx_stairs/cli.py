@@ -109,7 +109,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_critic_map(args: argparse.Namespace) -> int:
     from mjx_stairs import evaluate
-    from mjx_stairs.train import load_policy
+    from mjx_stairs.policy import load_policy
 
     policy = load_policy(args.checkpoint)
     m = evaluate.critic_map(
@@ -176,7 +176,7 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from mjx_stairs import export
-    from mjx_stairs.train import load_policy
+    from mjx_stairs.policy import load_policy
 
     try:
         policy = load_policy(args.checkpoint)

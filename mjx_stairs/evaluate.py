@@ -24,8 +24,8 @@ from mjx_stairs import atomic
 from mjx_stairs import env as envlib
 from mjx_stairs.config import apply_overrides, from_dict, to_dict
 from mjx_stairs.experiment import TerrainConfig, build_atlas
+from mjx_stairs.policy import Policy, load_policy, policy_action, policy_value, saved_config
 from mjx_stairs.robot import NOMINAL_BASE_HEIGHT
-from mjx_stairs.train import Policy, load_policy, policy_action, policy_value
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,7 +49,7 @@ class EvalSpec:
 def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> envlib.EnvConfig:
     """The EnvConfig the policy was trained with (robot, PD, obs layout), from its metadata,
     with ``overrides`` ("robot.ls_iterations=5", ...) applied."""
-    cfg = policy.metadata.get("config", {}).get("env")
+    cfg = saved_config(policy, "env")
     if cfg is None:
         cfg = to_dict(envlib.EnvConfig())
     return from_dict(envlib.EnvConfig, apply_overrides(cfg, overrides), prefix="env")

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_stairs import atomic, evaluate, logging_utils
-from mjx_stairs.train import load_policy
+from mjx_stairs.policy import load_policy
 
 PAPER_U_SUCCESS = {3: 91.3, 4: 87.7}
 """Paper, Table 1: U-shaped model on U-shaped stairs, test levels 3 and 4 (%)."""

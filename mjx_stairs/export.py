@@ -1,7 +1,7 @@
 """Ship a policy: ONE ONNX graph (normaliser -> CNN encoder -> actor MLP) and a JSON sidecar.
 
 The graph maps the raw observation `obs` [batch, 490] (the layout of mjx_stairs.env, no noise
-added) to the mean action `action` [batch, 12], exactly as `train.policy_action` does:
+added) to the mean action `action` [batch, 12], exactly as `policy.policy_action` does:
 
     x = clip((obs - mean) / (std + 0.01), -clip, clip)               # the actor's normaliser
     vec, map = x[:, :49], x[:, 49:].reshape(batch, 1, 21, 21)      # rows = y, columns = x
@@ -32,7 +32,7 @@ from mjx_stairs import atomic
 from mjx_stairs import normalizer as normlib
 from mjx_stairs import robot as rb
 from mjx_stairs.evaluate import env_config_of
-from mjx_stairs.train import Policy, load_policy, policy_action
+from mjx_stairs.policy import Policy, load_policy, policy_action
 
 OPSET = 17
 

@@ -42,7 +42,7 @@ from mjx_stairs import env as envlib  # noqa: E402
 from mjx_stairs.atomic import atomic_path  # noqa: E402
 from mjx_stairs.evaluate import env_config_of  # noqa: E402
 from mjx_stairs.experiment import TerrainConfig, build_atlas  # noqa: E402
-from mjx_stairs.train import Policy, load_policy, policy_action  # noqa: E402
+from mjx_stairs.policy import Policy, load_policy, policy_action  # noqa: E402
 
 
 class RenderError(RuntimeError):

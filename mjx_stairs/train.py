@@ -41,7 +41,6 @@ H100: the resume test fails without it and passes with it).
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import math
@@ -58,13 +57,12 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from mjx_stairs import checkpoint, logging_utils, networks, normalizer, optim, ppo
-from mjx_stairs.config import to_dict
+from mjx_stairs import checkpoint, logging_utils, networks, normalizer, optim, policy, ppo
 from mjx_stairs.networks import NetworkConfig, ObsLayout
+from mjx_stairs.policy import OBS_KEYS, config_dict, layout_dict
 from mjx_stairs.ppo import PPOConfig
 
 BATCH_AXIS = "batch"
-OBS_KEYS = ("state", "privileged_state")
 
 
 @dataclass(frozen=True)
@@ -518,18 +516,6 @@ def make_train(config, env, mesh: Mesh | None = None):
 # ----------------------------------------------------------------------------- checkpoints
 
 
-def _config_dict(config) -> dict[str, Any]:
-    if dataclasses.is_dataclass(config):
-        return to_dict(config)
-    return {k: to_dict(getattr(config, k)) for k in ("ppo", "network", "train")}
-
-
-def _layout_dict(layout: ObsLayout) -> dict[str, Any]:
-    return {"n_vec": layout.n_vec, "map_shape": list(layout.map_shape),
-            "obs_size": layout.obs_size, "obs_keys": list(OBS_KEYS),
-            "order": "[vec (n_vec) | map (row-major h*w)]"}
-
-
 _PACKERS: dict[int, tuple[Any, Callable, Callable]] = {}
 
 
@@ -564,8 +550,8 @@ def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
         "iteration": it,
         "env_steps": it * tc.num_envs * tc.unroll_length,
         "env_format": env_format,
-        "config": _config_dict(config),
-        "layout": _layout_dict(layout),
+        "config": config_dict(config),
+        "layout": layout_dict(layout),
         "action_size": int(host.params["log_std"].shape[0]),
         "jax_version": jax.__version__,
         "saved_at": time.time(),
@@ -594,87 +580,24 @@ def load_state(path: str | Path, trainer: Trainer) -> tuple[TrainState, dict]:
 
 
 def save_policy(path: str | Path, state: TrainState, config, layout: ObsLayout) -> None:
-    """Policy-only file for eval/export: params + normaliser + network config + obs layout."""
-    tree = {"params": jax.device_get(state.params),
-            "normalizer": jax.device_get(state.normalizer)}
-    it = int(jax.device_get(state.iteration))
-    tc = config.train
-    meta = {
-        "kind": "policy",
-        "iteration": it,
-        "env_steps": it * tc.num_envs * tc.unroll_length,
-        "network": to_dict(config.network),
-        "config": _config_dict(config),
-        "layout": _layout_dict(layout),
-        "action_size": int(tree["params"]["log_std"].shape[0]),
-    }
-    checkpoint.save(path, tree, meta)
+    """Policy-only file of a TrainState (see ``policy.save_policy``)."""
+    policy.save_policy(path, state.params, state.normalizer,
+                       int(jax.device_get(state.iteration)), config, layout)
 
 
 def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer) -> TrainState:
     """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
     starts from stage 1). The Adam moments, RNG and counters stay fresh."""
-    policy = load_policy(path)
+    saved = policy.load_policy(path)
     want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
-    got = jax.tree_util.tree_map(jnp.shape, (policy.params, policy.normalizer))
+    got = jax.tree_util.tree_map(jnp.shape, (saved.params, saved.normalizer))
     if want != got:
         raise checkpoint.CheckpointError(
             f"{path}: policy shapes do not fit this experiment's network and observation layout"
         )
-    params = jax.device_put(policy.params, trainer.sharding.params)
-    norm = jax.device_put(policy.normalizer, trainer.sharding.normalizer)
+    params = jax.device_put(saved.params, trainer.sharding.params)
+    norm = jax.device_put(saved.normalizer, trainer.sharding.normalizer)
     return state._replace(params=params, normalizer=norm)
-
-
-class Policy(NamedTuple):
-    params: networks.Params
-    normalizer: dict[str, normalizer.RunningStats]
-    network: NetworkConfig
-    layout: ObsLayout
-    action_size: int
-    metadata: dict
-
-
-def load_policy(path: str | Path) -> Policy:
-    """Read a policy file written by ``save_policy`` (validated against its own metadata).
-
-    A policy trained with a bfloat16 conv_impl is loaded with conv_impl "auto" (float32)."""
-    from mjx_stairs.config import ConfigError, from_dict
-
-    meta = checkpoint.load_metadata(path)
-    if meta.get("kind") != "policy":
-        raise checkpoint.CheckpointError(f"{path}: not a policy file (kind={meta.get('kind')})")
-    try:
-        net_cfg = from_dict(NetworkConfig, meta["network"])
-        layout = ObsLayout(int(meta["layout"]["n_vec"]), tuple(meta["layout"]["map_shape"]))
-        a = int(meta["action_size"])
-    except (KeyError, ConfigError, TypeError, ValueError) as e:
-        raise checkpoint.CheckpointError(f"{path}: bad policy metadata ({e})") from None
-    if net_cfg.conv_impl in networks.REDUCED_PRECISION_IMPLS:
-        # eval, play, the critic map and export compute the policy in float32, as a robot
-        # would run it; a bfloat16 encoder is a training-speed setting (meta keeps what it was)
-        net_cfg = dataclasses.replace(net_cfg, conv_impl="auto")
-    template = jax.eval_shape(lambda: {
-        "params": networks.init_params(jax.random.PRNGKey(0), net_cfg, layout.n_vec,
-                                       layout.map_shape, a),
-        "normalizer": {k: normalizer.init_stats(layout.obs_size) for k in OBS_KEYS},
-    })
-    tree, meta = checkpoint.load(path, template)
-    return Policy(tree["params"], tree["normalizer"], net_cfg, layout, a, meta)
-
-
-def policy_action(policy: Policy, obs: jax.Array, rng: jax.Array | None = None) -> jax.Array:
-    """Action for raw actor obs [..., D]: the mean, or a sample when ``rng`` is given."""
-    mean = ppo.policy_mean(policy.params, policy.normalizer, obs, policy.network, policy.layout)
-    if rng is None:
-        return mean
-    return networks.sample(rng, mean, policy.params["log_std"])
-
-
-def policy_value(policy: Policy, critic_obs: jax.Array) -> jax.Array:
-    """Critic value for raw privileged obs [..., D] -> [...]."""
-    return ppo.critic_value(policy.params, policy.normalizer, critic_obs, policy.network,
-                            policy.layout)
 
 
 # ----------------------------------------------------------------------------- host loop
@@ -780,7 +703,7 @@ def run(
         if path is None:
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
         state, meta = load_state(path, trainer)
-        diff = _config_diff(meta.get("config", {}), _config_dict(config))
+        diff = _config_diff(meta.get("config", {}), config_dict(config))
         if diff:
             warnings.warn(f"resuming {path} with a changed config: {'; '.join(diff)}",
                           stacklevel=2)
@@ -792,7 +715,7 @@ def run(
         if init_from:
             state = start_from_policy(state, init_from, trainer)
             print(f"initialised params and normaliser from {init_from}", flush=True)
-        (run_dir / "config.json").write_text(json.dumps(_config_dict(config), indent=2))
+        (run_dir / "config.json").write_text(json.dumps(config_dict(config), indent=2))
 
     t0 = time.time()
     compiled = _compiled_chunk(trainer, state)

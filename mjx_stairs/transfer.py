@@ -16,7 +16,7 @@ import numpy as np
 
 from mjx_stairs import atomic, evaluate
 from mjx_stairs.config import ConfigError, read_toml
-from mjx_stairs.train import load_policy
+from mjx_stairs.policy import load_policy
 
 PAPER_TABLE1 = {  # U-shaped model on each family, test levels 3 and 4 (%)
     "u_shaped": (91.3, 87.7),

@@ -14,7 +14,8 @@ import pytest
 onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
 
-from mjx_stairs import cli, export, networks, normalizer, train  # noqa: E402
+from mjx_stairs import cli, export, networks, normalizer  # noqa: E402
+from mjx_stairs import policy as policy_lib  # noqa: E402
 from mjx_stairs import robot as rb  # noqa: E402
 from mjx_stairs.experiment import ExperimentConfig  # noqa: E402
 
@@ -48,13 +49,14 @@ def _policy_state(seed: int = 0):
 def policy_file(tmp_path_factory):
     state, cfg = _policy_state()
     path = tmp_path_factory.mktemp("export") / "policy.npz"
-    train.save_policy(path, state, cfg, networks.ObsLayout(N_VEC, MAP))
+    policy_lib.save_policy(path, state.params, state.normalizer, 7, cfg,
+                           networks.ObsLayout(N_VEC, MAP))
     return path
 
 
 @pytest.fixture(scope="module")
 def policy(policy_file):
-    return train.load_policy(policy_file)
+    return policy_lib.load_policy(policy_file)
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +68,7 @@ def exported(policy, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def jax_action(policy):
-    return jax.jit(lambda o: train.policy_action(policy, o))
+    return jax.jit(lambda o: policy_lib.policy_action(policy, o))
 
 
 def _obs(n: int, seed: int) -> np.ndarray:

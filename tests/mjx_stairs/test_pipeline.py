@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mjx_stairs import bench, cli, evaluate, exp1, experiment, transfer
-from mjx_stairs.train import load_policy
+from mjx_stairs.policy import load_policy
 
 TINY = evaluate.EvalSpec(levels=(0, 5), robots_per_level=2, episode_length_s=1.0, resolution=0.05)
 

@@ -7,12 +7,12 @@ import dataclasses
 import types
 
 import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
 
-from mjx_stairs import cli, mcap_log, networks, normalizer, play, train
+from mjx_stairs import cli, mcap_log, networks, normalizer, play
+from mjx_stairs import policy as policy_lib
 from mjx_stairs import robot as rb
 from mjx_stairs.experiment import ExperimentConfig
 
@@ -28,11 +28,9 @@ def policy_file(tmp_path_factory):
     cfg = ExperimentConfig()
     params = networks.init_params(jax.random.PRNGKey(0), cfg.network, 49, (21, 21), 12)
     params["actor"][-1]["w"] = params["actor"][-1]["w"] * 30.0
-    state = types.SimpleNamespace(
-        params=params, iteration=jnp.asarray(0, jnp.int32),
-        normalizer={k: normalizer.init_stats(490) for k in train.OBS_KEYS})
+    norm = {k: normalizer.init_stats(490) for k in policy_lib.OBS_KEYS}
     path = tmp_path_factory.mktemp("play") / "policy.npz"
-    train.save_policy(path, state, cfg, networks.ObsLayout(49, (21, 21)))
+    policy_lib.save_policy(path, params, norm, 0, cfg, networks.ObsLayout(49, (21, 21)))
     return path
 
 
@@ -307,12 +305,12 @@ def test_a_policy_trained_with_a_bf16_encoder_loads_in_float32(policy_file, tmp_
     cfg = ExperimentConfig()
     cfg = dataclasses.replace(cfg, network=dataclasses.replace(cfg.network,
                                                                conv_impl="fused_bf16"))
-    ref = train.load_policy(policy_file)
-    state = types.SimpleNamespace(params=ref.params, iteration=jnp.asarray(0, jnp.int32),
-                                  normalizer=ref.normalizer)
+    ref = policy_lib.load_policy(policy_file)
     path = tmp_path / "bf16.npz"
-    train.save_policy(path, state, cfg, networks.ObsLayout(49, (21, 21)))
-    pol = train.load_policy(path)
+    policy_lib.save_policy(path, ref.params, ref.normalizer, 0, cfg,
+                           networks.ObsLayout(49, (21, 21)))
+    pol = policy_lib.load_policy(path)
     assert pol.network.conv_impl == "auto" and pol.metadata["network"]["conv_impl"] == "fused_bf16"
     obs = jax.random.normal(jax.random.PRNGKey(2), (4, 490))
-    np.testing.assert_array_equal(train.policy_action(pol, obs), train.policy_action(ref, obs))
+    np.testing.assert_array_equal(policy_lib.policy_action(pol, obs),
+                                  policy_lib.policy_action(ref, obs))

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from mjx_stairs import checkpoint, train
+from mjx_stairs import policy as policy_lib
 from mjx_stairs.networks import NetworkConfig
 from mjx_stairs.ppo import PPOConfig
 from mjx_stairs.train import LearnerConfig, TrainConfig
@@ -176,12 +177,12 @@ def test_run_then_resume_equals_one_run(tmp_path):
 
     policy_file = run_dir / "policy.npz"
     assert policy_file.stat().st_size < 16 * 2**20
-    policy = train.load_policy(policy_file)
+    policy = policy_lib.load_policy(policy_file)
     assert _leaves_equal(policy.params, resumed.state.params)
     assert policy.layout == train.ObsLayout(5, ()) and policy.action_size == 2
     obs = np.zeros((3, 5), np.float32)
-    assert train.policy_action(policy, obs).shape == (3, 2)
-    assert train.policy_value(policy, obs).shape == (3,)
+    assert policy_lib.policy_action(policy, obs).shape == (3, 2)
+    assert policy_lib.policy_value(policy, obs).shape == (3,)
 
     # resume from a state file carried elsewhere, into a fresh run directory
     ck = half.run_dir / "checkpoints" / "state_00000010.npz"
