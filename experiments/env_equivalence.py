@@ -7,46 +7,32 @@ step them with the same random actions for ``--steps`` policy steps (2 s episode
 ends an episode and is reset on the way). Prints, for qpos, reward, done and the critic's
 observation, whether the two trajectories are bit for bit the same and their largest difference;
 exits 1 if any differs. Used for changes meant to leave the env's numbers alone (NOTES.md,
-Change 10: the NaN guard).
+Change 10: the NaN guard; issue 20: the package's new layout). REV is checked out with
+``git archive`` and stepped in a process of its own, so the two trees may lay the package out
+differently.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
+from train_equivalence import ROOT, _module, rev_tree, run_worker
 
 import terrains
-from mjx_stairs import env as env_now
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
-def env_module_at(rev: str):
-    """mjx_stairs/env.py as of git revision ``rev``, imported as a module of its own."""
-    shown = subprocess.run(["git", "show", f"{rev}:mjx_stairs/env.py"], cwd=ROOT,
-                           capture_output=True, text=True)
-    if shown.returncode:
-        raise SystemExit(f"no mjx_stairs/env.py at git revision {rev!r}: "
-                         f"{shown.stderr.strip().splitlines()[-1]}")
-    src = shown.stdout
-    path = Path(tempfile.mkdtemp()) / "env_at_rev.py"
-    path.write_text(src)
-    spec = importlib.util.spec_from_file_location("env_at_rev", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+def trajectory(robots: int, steps: int) -> dict[str, np.ndarray]:
+    """This process's env (whichever layout its tree has) stepped with random actions."""
+    import jax
+    import jax.numpy as jnp
 
-
-def trajectory(module, atlas, robots: int, steps: int) -> dict[str, np.ndarray]:
+    module = _module("mjx_stairs.env.stair_env", "mjx_stairs.env")
+    atlas = terrains.build_atlas(["pyramid"], "train", levels=[0, 6], variants_per_family=1,
+                                 resolution=0.05, tile_size=10.0, border=1.0)
     env = module.StairEnv(atlas, module.EnvConfig(episode_length_s=2.0))
     reset, step = jax.jit(jax.vmap(env.reset_at)), jax.jit(jax.vmap(env.step))
     rows = jnp.asarray([0, 1] * (robots // 2) + [0] * (robots % 2), jnp.int32)
@@ -65,14 +51,20 @@ def trajectory(module, atlas, robots: int, steps: int) -> dict[str, np.ndarray]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("rev", help="git revision whose mjx_stairs/env.py to compare with")
+    ap.add_argument("rev", nargs="?", help="git revision whose env to compare with")
     ap.add_argument("--steps", type=int, default=120)
     ap.add_argument("--robots", type=int, default=16)
+    ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
-    atlas = terrains.build_atlas(["pyramid"], "train", levels=[0, 6], variants_per_family=1,
-                                 resolution=0.05, tile_size=10.0, border=1.0)
-    now = trajectory(env_now, atlas, args.robots, args.steps)
-    then = trajectory(env_module_at(args.rev), atlas, args.robots, args.steps)
+    if args.worker:
+        np.savez(args.worker, **trajectory(args.robots, args.steps))
+        return 0
+    if not args.rev:
+        ap.error("REV is required")
+    tmp = Path(tempfile.mkdtemp())
+    flags = ["--steps", str(args.steps), "--robots", str(args.robots)]
+    now = run_worker(__file__, ROOT, tmp / "now.npz", flags)
+    then = run_worker(__file__, rev_tree(args.rev), tmp / "then.npz", flags)
     print(f"{args.robots} robots x {args.steps} steps, {int(now['done'].sum())} episode ends")
     same = True
     for k in now:

@@ -113,10 +113,10 @@ def worker(out_path: str, experiments: list[str]) -> None:
     np.savez(out_path, **out)
 
 
-def run_tree(tree: Path, out: Path, experiments: list[str]) -> dict[str, np.ndarray]:
+def run_worker(script: str, tree: Path, out: Path, flags: list[str]) -> dict[str, np.ndarray]:
+    """Run ``script --worker out *flags`` on the code and files of ``tree``; its arrays."""
     env = dict(os.environ, PYTHONPATH=str(tree), JAX_PLATFORMS="cpu")
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(out),
-           "--experiments", *experiments]
+    cmd = [sys.executable, str(Path(script).resolve()), "--worker", str(out), *flags]
     subprocess.run(cmd, cwd=tree, env=env, check=True)
     with np.load(out) as f:
         return dict(f)
@@ -136,12 +136,13 @@ def main() -> int:
     if not args.rev:
         ap.error("REV is required")
     tmp = Path(tempfile.mkdtemp())
-    now = run_tree(ROOT, tmp / "now.npz", args.experiments)
+    flags = ["--experiments", *args.experiments]
+    now = run_worker(__file__, ROOT, tmp / "now.npz", flags)
     if args.then:
         with np.load(args.then) as f:
             then = dict(f)
     else:
-        then = run_tree(rev_tree(args.rev), tmp / "then.npz", args.experiments)
+        then = run_worker(__file__, rev_tree(args.rev), tmp / "then.npz", flags)
     print(f"this tree's numbers: {tmp / 'now.npz'}")
     same = set(now) == set(then)
     for k in sorted(set(now) - set(then)) + sorted(set(then) - set(now)):

@@ -8,8 +8,8 @@ import sys
 import time
 from pathlib import Path
 
-from mjx_stairs.checkpoint import CheckpointError
 from mjx_stairs.config import ConfigError
+from mjx_stairs.rl.checkpoint import CheckpointError
 
 
 def _csv_ints(text: str) -> tuple[int, ...]:
@@ -22,7 +22,8 @@ def _csv_ints(text: str) -> tuple[int, ...]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from mjx_stairs import experiment, train
+    from mjx_stairs.rl import runner as train
+    from mjx_stairs.study import experiment
 
     config, cpu = experiment.load(args.config, args.overrides)
     if cpu:
@@ -41,7 +42,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_exp1_report(args: argparse.Namespace) -> int:
-    from mjx_stairs import evaluate, exp1
+    from mjx_stairs.study import evaluate, exp1
 
     spec = evaluate.EvalSpec(
         robots_per_level=args.robots,
@@ -54,7 +55,7 @@ def cmd_exp1_report(args: argparse.Namespace) -> int:
 
 
 def cmd_curves(args: argparse.Namespace) -> int:
-    from mjx_stairs import exp1
+    from mjx_stairs.study import exp1
 
     runs = {}
     for item in args.run:
@@ -66,14 +67,14 @@ def cmd_curves(args: argparse.Namespace) -> int:
 
 
 def cmd_exp1(args: argparse.Namespace) -> int:
-    from mjx_stairs import exp1
+    from mjx_stairs.study import exp1
 
     exp1.run_pipeline(force=args.force, robots=args.robots, overrides=tuple(args.overrides))
     return 0
 
 
 def cmd_transfer(args: argparse.Namespace) -> int:
-    from mjx_stairs import evaluate, transfer
+    from mjx_stairs.study import evaluate, transfer
 
     spec = evaluate.EvalSpec(
         levels=tuple(lv - 1 for lv in args.levels),
@@ -92,7 +93,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from mjx_stairs import evaluate
+    from mjx_stairs.study import evaluate
 
     spec = evaluate.EvalSpec(
         schedule=args.schedule,
@@ -108,8 +109,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_critic_map(args: argparse.Namespace) -> int:
-    from mjx_stairs import evaluate
-    from mjx_stairs.policy import load_policy
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import evaluate
 
     policy = load_policy(args.checkpoint)
     m = evaluate.critic_map(
@@ -121,8 +122,8 @@ def cmd_critic_map(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from mjx_stairs import bench, experiment
     from mjx_stairs.atomic import write_text
+    from mjx_stairs.study import bench, experiment
 
     config, _ = experiment.load(args.config, args.overrides, cpu=False)
     out = bench.run_bench(
@@ -146,7 +147,7 @@ def cmd_terrain(args: argparse.Namespace) -> int:
 
 
 def cmd_play(args: argparse.Namespace) -> int:
-    from mjx_stairs import play
+    from mjx_stairs.tools import play
 
     spec = play.PlaySpec(
         family=args.family,
@@ -175,8 +176,8 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from mjx_stairs import export
-    from mjx_stairs.policy import load_policy
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.tools import export
 
     try:
         policy = load_policy(args.checkpoint)

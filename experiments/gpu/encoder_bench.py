@@ -22,8 +22,9 @@ import time
 import jax
 import jax.numpy as jnp
 
-from mjx_stairs import atomic, networks
-from mjx_stairs.networks import NetworkConfig, ObsLayout
+from mjx_stairs import atomic
+from mjx_stairs.rl import networks
+from mjx_stairs.rl.networks import NetworkConfig, ObsLayout
 
 LAYOUT = ObsLayout(49, (21, 21))  # env.N_VEC, the 21 x 21 height scan
 

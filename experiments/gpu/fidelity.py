@@ -50,8 +50,8 @@ def write(path: Path, record: dict) -> None:
 def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float) -> None:
     import jax
 
-    from mjx_stairs.evaluate import CellSpec, success_by_cell
-    from mjx_stairs.train import load_policy
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study.evaluate import CellSpec, success_by_cell
 
     policies = {k: load_policy(v) for k, v in POLICIES.items()}
     for name in options:
@@ -69,9 +69,9 @@ def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float)
 
 def _gt_task(args) -> str:
     policy_name, cell, robots, out, res, terrain = args
-    from mjx_stairs.evaluate import CellSpec
-    from mjx_stairs.ground_truth import success_in_ground_truth
-    from mjx_stairs.train import load_policy
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study.evaluate import CellSpec
+    from mjx_stairs.study.ground_truth import success_in_ground_truth
 
     path = Path(out) / f"gt_{policy_name}_{cell[0]}_{cell[1]}_{cell[2] + 1}.json"
     if path.exists():

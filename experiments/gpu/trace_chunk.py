@@ -28,7 +28,9 @@ import time
 
 import jax
 
-from mjx_stairs import atomic, experiment, train
+from mjx_stairs import atomic
+from mjx_stairs.rl import runner as train
+from mjx_stairs.study import experiment
 
 
 def _events(trace_dir: str) -> tuple[list[dict], dict[int, str]]:

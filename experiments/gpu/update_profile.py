@@ -22,7 +22,10 @@ import json
 import jax
 from encoder_bench import time_ms  # this folder, on sys.path when run as a script
 
-from mjx_stairs import atomic, experiment, ppo, train
+from mjx_stairs import atomic
+from mjx_stairs.rl import ppo
+from mjx_stairs.rl import runner as train
+from mjx_stairs.study import experiment
 
 
 def main() -> None:

@@ -20,7 +20,7 @@ from mjx_stairs.config import (
     to_dict,
     to_json,
 )
-from mjx_stairs.train import LearnerConfig
+from mjx_stairs.rl.runner import LearnerConfig
 
 
 @dataclass(frozen=True)
@@ -140,7 +140,7 @@ EXPERIMENT_FILES = sorted(
 
 @pytest.mark.parametrize("path", EXPERIMENT_FILES, ids=lambda p: p.name)
 def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
-    from mjx_stairs import experiment
+    from mjx_stairs.study import experiment
 
     for cpu in (False, True):
         cfg, _ = experiment.load(path, [], cpu=cpu)

@@ -1,0 +1,1 @@
+"""The stair-climbing env: observation, rewards, endings, curriculum, auto-reset (uses sim)."""

@@ -1,0 +1,124 @@
+"""A trained policy as a file: save, load, act, value, and the config it was trained with.
+
+A policy file (``policy.npz``, written by the trainer next to its checkpoints) holds the params
+and the observation normaliser as arrays, and as JSON metadata the network config, the
+observation layout, the action size and the whole experiment config of the run. Readers of a
+policy (evaluation, play, export) import this module, never the trainer (brax keeps
+``load_policy`` in its checkpoint module for the same reason).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from mjx_stairs.config import ConfigError, from_dict, to_dict
+from mjx_stairs.rl import checkpoint, networks, normalizer, ppo
+from mjx_stairs.rl.networks import NetworkConfig, ObsLayout
+
+STD_EPS = normalizer.STD_EPS
+
+OBS_KEYS = ("state", "privileged_state")
+"""The observation streams: the actor's (noisy) and the critic's (privileged, clean)."""
+
+
+class Policy(NamedTuple):
+    params: networks.Params
+    normalizer: dict[str, normalizer.RunningStats]
+    network: NetworkConfig
+    layout: ObsLayout
+    action_size: int
+    metadata: dict
+
+
+def config_dict(config) -> dict[str, Any]:
+    """The plain dict of an experiment config (or of its ppo / network / train parts)."""
+    if dataclasses.is_dataclass(config):
+        return to_dict(config)
+    return {k: to_dict(getattr(config, k)) for k in ("ppo", "network", "train")}
+
+
+def layout_dict(layout: ObsLayout) -> dict[str, Any]:
+    """The observation layout as saved in checkpoints and policy files."""
+    return {"n_vec": layout.n_vec, "map_shape": list(layout.map_shape),
+            "obs_size": layout.obs_size, "obs_keys": list(OBS_KEYS),
+            "order": "[vec (n_vec) | map (row-major h*w)]"}
+
+
+def save_policy(path: str | Path, params: networks.Params,
+                norm: dict[str, normalizer.RunningStats], iteration: int, config,
+                layout: ObsLayout) -> None:
+    """Policy-only file for eval/export: params + normaliser + network config + obs layout."""
+    tree = {"params": jax.device_get(params), "normalizer": jax.device_get(norm)}
+    tc = config.train
+    meta = {
+        "kind": "policy",
+        "iteration": int(iteration),
+        "env_steps": int(iteration) * tc.num_envs * tc.unroll_length,
+        "network": to_dict(config.network),
+        "config": config_dict(config),
+        "layout": layout_dict(layout),
+        "action_size": int(tree["params"]["log_std"].shape[0]),
+    }
+    checkpoint.save(path, tree, meta)
+
+
+def load_policy(path: str | Path) -> Policy:
+    """Read a policy file written by ``save_policy`` (validated against its own metadata).
+
+    A policy trained with a bfloat16 conv_impl is loaded with conv_impl "auto" (float32)."""
+    meta = checkpoint.load_metadata(path)
+    if meta.get("kind") != "policy":
+        raise checkpoint.CheckpointError(f"{path}: not a policy file (kind={meta.get('kind')})")
+    try:
+        net_cfg = from_dict(NetworkConfig, meta["network"])
+        layout = ObsLayout(int(meta["layout"]["n_vec"]), tuple(meta["layout"]["map_shape"]))
+        a = int(meta["action_size"])
+    except (KeyError, ConfigError, TypeError, ValueError) as e:
+        raise checkpoint.CheckpointError(f"{path}: bad policy metadata ({e})") from None
+    if net_cfg.conv_impl in networks.REDUCED_PRECISION_IMPLS:
+        # eval, play, the critic map and export compute the policy in float32, as a robot
+        # would run it; a bfloat16 encoder is a training-speed setting (meta keeps what it was)
+        net_cfg = dataclasses.replace(net_cfg, conv_impl="auto")
+    template = jax.eval_shape(lambda: {
+        "params": networks.init_params(jax.random.PRNGKey(0), net_cfg, layout.n_vec,
+                                       layout.map_shape, a),
+        "normalizer": {k: normalizer.init_stats(layout.obs_size) for k in OBS_KEYS},
+    })
+    tree, meta = checkpoint.load(path, template)
+    return Policy(tree["params"], tree["normalizer"], net_cfg, layout, a, meta)
+
+
+def policy_action(policy: Policy, obs: jax.Array, rng: jax.Array | None = None) -> jax.Array:
+    """Action for raw actor obs [..., D]: the mean, or a sample when ``rng`` is given."""
+    mean = ppo.policy_mean(policy.params, policy.normalizer, obs, policy.network, policy.layout)
+    if rng is None:
+        return mean
+    return networks.sample(rng, mean, policy.params["log_std"])
+
+
+def policy_value(policy: Policy, critic_obs: jax.Array) -> jax.Array:
+    """Critic value for raw privileged obs [..., D] -> [...]."""
+    return ppo.critic_value(policy.params, policy.normalizer, critic_obs, policy.network,
+                            policy.layout)
+
+
+def normaliser_constants(policy: Policy) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(mean [D], std + STD_EPS [D], clip) of the actor stream as the policy applies them, or
+    None when the policy does not normalise observations."""
+    if not policy.network.normalize_obs:
+        return None
+    stats = jax.tree_util.tree_map(np.asarray, policy.normalizer["state"])
+    mean = np.asarray(stats.mean, np.float32)
+    denom = np.asarray(normalizer.std(stats) + normalizer.STD_EPS, np.float32)
+    return mean, denom, float(policy.network.obs_clip)
+
+
+def saved_config(policy: Policy, part: str) -> dict[str, Any] | None:
+    """The part (e.g. "env") of the experiment config the policy was trained with, as the plain
+    dict saved in its file; None for a file that does not carry it."""
+    return policy.metadata.get("config", {}).get(part)

@@ -1,0 +1,220 @@
+"""The Unitree Go2 on MJX: build the MuJoCo model with a terrain heightfield, put it on the device.
+
+The MJCF (assets/go2.xml) is our own, written from shared/reference/go2.md. This module attaches
+the atlas heightfield, applies the solver and collision settings of a `RobotConfig`, and exposes
+the ids and constants the env needs (joint order, collision geoms, nominal pose, limits).
+
+Frames: x forward, y left, z up. The heightfield grid `heights[iy, ix]` is the terrain height at
+world (ix * res, iy * res): the atlas corner point is the world origin.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from mjx_stairs.sim import contact  # noqa: F401  (registers the 'nearest' terrain collider)
+
+ASSET = Path(__file__).parent / "assets" / "go2.xml"
+
+LEGS = ("FL", "FR", "RL", "RR")
+JOINT_NAMES = tuple(f"{leg}_{part}_joint" for leg in LEGS for part in ("hip", "thigh", "calf"))
+"""Joint order of actions, observations and actuators: FL, FR, RL, RR x (hip, thigh, calf)."""
+
+NOMINAL_JOINT_POS = np.array(
+    [0.1, 0.8, -1.5, -0.1, 0.8, -1.5, 0.1, 1.0, -1.5, -0.1, 1.0, -1.5], np.float32
+)
+"""[12] standing pose (rad), reference table."""
+
+_HIP = (-1.0472, 1.0472)
+_FRONT_THIGH = (-1.5708, 3.4907)
+_REAR_THIGH = (-0.5236, 4.5379)
+_CALF = (-2.7227, -0.83776)
+JOINT_RANGE = np.array(
+    [_HIP, _FRONT_THIGH, _CALF, _HIP, _FRONT_THIGH, _CALF, _HIP, _REAR_THIGH, _CALF]
+    + [_HIP, _REAR_THIGH, _CALF],
+    np.float32,
+)
+"""[12, 2] joint position limits (rad), reference table."""
+
+TORQUE_LIMIT = np.array([23.7, 23.7, 45.43] * 4, np.float32)
+"""[12] motor torque limits (N m): hip and thigh 23.7, calf 45.43."""
+
+VELOCITY_LIMIT = 30.0
+"""Joint velocity limit (rad/s), reference table."""
+
+NOMINAL_BASE_HEIGHT = 0.30
+"""Approximate base height above flat ground in the nominal pose (m)."""
+
+# Collision sphere groups by geom name suffix.
+SPHERE_GROUPS = {
+    "foot": tuple(f"{leg}_foot" for leg in LEGS),
+    "knee": tuple(f"{leg}_knee" for leg in LEGS),
+    "shin": tuple(f"{leg}_shin" for leg in LEGS),
+    "trunk": ("trunk_fl", "trunk_fr", "trunk_rl", "trunk_rr"),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotConfig:
+    """Robot, actuation and solver settings."""
+
+    kp: float = 35.0  # PD stiffness (N m / rad), the paper's "stiff" variant
+    kd: float = 1.0  # PD damping (N m s / rad)
+    torque_scale: float = 1.0  # multiplies the reference torque limits of the PD clamp
+    action_scale: float = 0.5  # q_target = q_nominal + action_scale * action
+    timestep: float = 0.005  # physics step (s)
+    solver_iterations: int = 1  # Newton iterations per physics step
+    ls_iterations: int = 5  # line-search iterations per Newton iteration
+    shin_collision: bool = True  # collide the mid-shin spheres with the terrain
+    # Sphere-terrain collider: "mjx" (MJX's prism collider, 4 contacts per sphere) or "nearest"
+    # (mjx_stairs.sim.contact: the exact nearest surface point, 2 contacts per sphere).
+    terrain_contacts: str = "mjx"
+    friction: float = 0.8  # foot-terrain sliding friction
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotIds:
+    """Indices into the MuJoCo model, looked up once at build time."""
+
+    base_body: int
+    hfield_geom: int
+    foot_geoms: np.ndarray  # [4] FL, FR, RL, RR
+    knee_geoms: np.ndarray  # [4]
+    shin_geoms: np.ndarray  # [4]
+    trunk_geoms: np.ndarray  # [4]
+    qpos_joints: np.ndarray  # [12] qpos addresses of the joints, in JOINT_NAMES order
+    qvel_joints: np.ndarray  # [12] qvel addresses of the joints
+
+
+@dataclasses.dataclass(frozen=True)
+class Robot:
+    """A built robot + terrain: the MuJoCo model, its MJX copy and the ids."""
+
+    mj_model: mujoco.MjModel
+    mjx_model: mjx.Model
+    ids: RobotIds
+    config: RobotConfig
+
+
+def build_mj_model(
+    heights: np.ndarray | None, resolution: float, config: RobotConfig = RobotConfig()
+) -> mujoco.MjModel:
+    """Compile the Go2 with a terrain heightfield.
+
+    Args:
+      heights: [ny, nx] terrain heights (m) at world (ix * res, iy * res); None for a 20 m x 20 m
+        flat floor.
+      resolution: grid spacing (m).
+      config: robot and solver settings.
+    """
+    spec = mujoco.MjSpec.from_file(str(ASSET))
+    spec.option.timestep = config.timestep
+    spec.option.iterations = config.solver_iterations
+    spec.option.ls_iterations = config.ls_iterations
+    if heights is None:
+        resolution = 0.5
+        heights = np.zeros((41, 41), np.float32)
+    heights = np.asarray(heights, np.float32)
+    if heights.ndim != 2 or min(heights.shape) < 2:
+        raise ValueError(f"heights must be a 2-D grid of at least 2 x 2, got shape {heights.shape}")
+    if not np.all(np.isfinite(heights)):
+        raise ValueError("heights contain NaN or infinite values")
+    add_heightfield(spec, heights, resolution, config.friction)
+    for name in SPHERE_GROUPS["foot"]:
+        spec.geom(name).friction = [config.friction, 0.02, 0.01]
+    if not config.shin_collision:
+        for name in SPHERE_GROUPS["shin"]:
+            spec.geom(name).contype = 0
+    if config.terrain_contacts == "nearest":
+        # The same spheres as ellipsoids with equal radii: MJX then collides them with the
+        # terrain through mjx_stairs.sim.contact (registered for heightfield-ellipsoid pairs).
+        for name in (n for group in SPHERE_GROUPS.values() for n in group):
+            geom = spec.geom(name)
+            geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
+            geom.size = [geom.size[0]] * 3
+    elif config.terrain_contacts != "mjx":
+        raise ValueError(
+            f"robot.terrain_contacts must be 'mjx' or 'nearest', got {config.terrain_contacts!r}"
+        )
+    return spec.compile()
+
+
+def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,
+                    friction: float) -> None:
+    """Add the terrain heightfield `heights` [ny, nx] (at world (ix * res, iy * res)) to `spec`."""
+    ny, nx = heights.shape
+    lo, hi = float(heights.min()), float(heights.max())
+    span = hi - lo
+    data = (heights - lo) / span if span > 0 else np.zeros_like(heights)
+    rx, ry = 0.5 * (nx - 1) * resolution, 0.5 * (ny - 1) * resolution
+    spec.add_hfield(
+        name="terrain",
+        nrow=ny,
+        ncol=nx,
+        size=[rx, ry, max(span, 1e-3), 0.5],
+        userdata=data.ravel().tolist(),
+    )
+    spec.worldbody.add_geom(
+        name="terrain",
+        type=mujoco.mjtGeom.mjGEOM_HFIELD,
+        hfieldname="terrain",
+        pos=[rx, ry, lo],
+        contype=0,
+        conaffinity=1,
+        material="terrain",
+        friction=[friction, 0.02, 0.01],
+    )
+
+
+def robot_ids(model: mujoco.MjModel) -> RobotIds:
+    """Look up the ids the env needs."""
+
+    def geoms(group: str) -> np.ndarray:
+        return np.array([model.geom(n).id for n in SPHERE_GROUPS[group]], np.int32)
+
+    joints = [model.joint(n) for n in JOINT_NAMES]
+    return RobotIds(
+        base_body=model.body("base").id,
+        hfield_geom=model.geom("terrain").id,
+        foot_geoms=geoms("foot"),
+        knee_geoms=geoms("knee"),
+        shin_geoms=geoms("shin"),
+        trunk_geoms=geoms("trunk"),
+        qpos_joints=np.array([int(j.qposadr[0]) for j in joints], np.int32),
+        qvel_joints=np.array([int(j.dofadr[0]) for j in joints], np.int32),
+    )
+
+
+def build(
+    heights: np.ndarray | None, resolution: float, config: RobotConfig = RobotConfig()
+) -> Robot:
+    """Build the MuJoCo model with the terrain and put it on the default device."""
+    mj_model = build_mj_model(heights, resolution, config)
+    return Robot(mj_model, mjx.put_model(mj_model), robot_ids(mj_model), config)
+
+
+def pd_torque(
+    q_target: jnp.ndarray,
+    q: jnp.ndarray,
+    qd: jnp.ndarray,
+    kp: jnp.ndarray | float,
+    kd: jnp.ndarray | float,
+    limit: jnp.ndarray,
+) -> jnp.ndarray:
+    """Joint-position PD with a torque clamp: clip(kp (q* - q) - kd qd, -limit, limit). [..., 12]"""
+    return jnp.clip(kp * (q_target - q) - kd * qd, -limit, limit)
+
+
+def standing_qpos(xy: tuple[float, float] = (0.0, 0.0), z: float = 0.445) -> np.ndarray:
+    """[19] qpos of the robot at (x, y, z), upright, facing +x, joints in the nominal pose."""
+    qpos = np.zeros(19, np.float32)
+    qpos[0:3] = (xy[0], xy[1], z)
+    qpos[3] = 1.0
+    qpos[7:] = NOMINAL_JOINT_POS
+    return qpos

@@ -1,0 +1,1 @@
+"""Experiments and studies: configs, evaluation, EXP1, transfer matrix, benchmarks, plots."""

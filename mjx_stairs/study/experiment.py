@@ -1,0 +1,161 @@
+"""An experiment = terrain + env + learner settings, loaded from experiments/*.toml.
+
+A TOML file may carry a `[cpu]` table of overrides (dotted keys, as on the command line) that is
+applied when JAX runs on the CPU, so `make train-stage1` on a laptop runs a small preset that
+finishes in minutes instead of the 4096-robot GPU run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import jax
+
+from mjx_stairs.config import ConfigError, apply_overrides, from_dict, read_toml
+from mjx_stairs.env.rewards import PRESETS
+from mjx_stairs.env.stair_env import EnvConfig, StairEnv
+from mjx_stairs.rl.networks import NetworkConfig
+from mjx_stairs.rl.ppo import PPOConfig
+from mjx_stairs.rl.runner import TrainConfig
+
+
+@dataclass(frozen=True)
+class TerrainConfig:
+    """Which tiles the atlas holds."""
+
+    families: tuple[str, ...] = field(default=("pyramid",), metadata={"help": "stair families"})
+    schedule: str = field(default="train", metadata={"help": "train | test | extended"})
+    levels: tuple[int, ...] = field(default=(), metadata={"help": "0-based levels; () = all"})
+    variants_per_family: int = field(default=4, metadata={"help": "atlas columns per family"})
+    resolution: float = field(default=0.025, metadata={"help": "grid spacing (m)"})
+    tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
+    border: float = field(default=2.0, metadata={"help": "flat border around the atlas (m)"})
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """Everything one training run needs."""
+
+    terrain: TerrainConfig = field(default_factory=TerrainConfig)
+    env: EnvConfig = field(default_factory=EnvConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    reward_preset: str = field(
+        default="", metadata={"help": "stage1 | stage2: start env.rewards from this preset"}
+    )
+    init_from: str = field(
+        default="", metadata={"help": "policy file whose params and normaliser start this run"}
+    )
+    publish_dir: str = field(
+        default="", metadata={"help": "copy policy, metrics, config and run facts here at the end"}
+    )
+
+
+def load(path: str | Path | None, overrides: Iterable[str] = (), cpu: bool | None = None):
+    """Load an experiment; returns (config, applied_cpu_preset: bool).
+
+    `reward_preset` replaces env.rewards by a preset before the file's own [env.rewards] entries
+    and the overrides apply on top of it. With `cpu` None, the [cpu] table applies when JAX's
+    default backend is the CPU.
+    """
+    data: dict[str, Any] = {}
+    if path is not None:
+        path = Path(path)
+        data = read_toml(path)
+    cpu_table = data.pop("cpu", {})
+    if cpu is None:
+        cpu = jax.default_backend() == "cpu"
+    overrides = list(overrides)
+    if cpu and cpu_table:
+        overrides = [f"{k}={_toml_literal(v)}" for k, v in _flatten(cpu_table)] + overrides
+    data = apply_overrides(data, overrides)
+    preset = data.get("reward_preset", "")
+    if preset:
+        if preset not in PRESETS:
+            raise ConfigError(
+                f"reward_preset: unknown preset {preset!r} (known: {sorted(PRESETS)})"
+            )
+        base = dataclasses.asdict(PRESETS[preset])
+        env = data.setdefault("env", {})
+        env["rewards"] = {**base, **env.get("rewards", {})}
+    try:
+        config = from_dict(ExperimentConfig, data)
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}" if path else str(e)) from None
+    return config, bool(cpu and cpu_table)
+
+
+def build_atlas(terrain: TerrainConfig):
+    """The atlas a TerrainConfig describes."""
+    import terrains
+
+    return terrains.build_atlas(
+        terrain.families,
+        schedule=terrain.schedule,
+        levels=list(terrain.levels) or None,
+        variants_per_family=terrain.variants_per_family,
+        resolution=terrain.resolution,
+        tile_size=terrain.tile_size,
+        border=terrain.border,
+    )
+
+
+def make_env(config: ExperimentConfig) -> StairEnv:
+    """Atlas + env of an experiment."""
+    return StairEnv(build_atlas(config.terrain), config.env)
+
+
+def publish(run_dir: str | Path, dest: str | Path, record: dict[str, Any], stop: str) -> None:
+    """Copy a run's policy, metrics and config to `dest` and write run.json (hardware, wall
+    time, env steps, steps/s). Each file is written through a temporary name and a rename."""
+    import json
+    import platform
+
+    from mjx_stairs import atomic
+    from mjx_stairs.rl import logger as logging_utils
+
+    run_dir, dest = Path(run_dir), Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in ("policy.npz", "metrics.jsonl", "config.json"):
+        atomic.copy_file(run_dir / name, dest / name)
+    rows = logging_utils.read_jsonl(run_dir / "metrics.jsonl")
+    rates = [r["perf/steps_per_s"] for r in rows[1:]] or [r["perf/steps_per_s"] for r in rows]
+    facts = {
+        "run_dir": str(run_dir),
+        "device": jax.devices()[0].device_kind,
+        "devices": len(jax.devices()),
+        "backend": jax.default_backend(),
+        "host": platform.node(),
+        "jax": jax.__version__,
+        "iterations": record.get("iteration"),
+        "env_steps": record.get("env_steps"),
+        "wall_time_s": record.get("wall_time"),
+        "compile_s": record.get("perf/compile_s"),
+        "steps_per_s_median": sorted(rates)[len(rates) // 2] if rates else None,
+        "stop_reason": stop,
+        "final": {k: record.get(k) for k in ("episode/return", "level", "at_top", "success")},
+    }
+    atomic.write_text(dest / "run.json", json.dumps(facts, indent=2))
+
+
+def _flatten(table: dict, prefix: str = ""):
+    for k, v in table.items():
+        key = f"{prefix}.{k}" if prefix else k
+        if isinstance(v, dict):
+            yield from _flatten(v, key)
+        else:
+            yield key, v
+
+
+def _toml_literal(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_literal(x) for x in v) + "]"
+    return repr(v)

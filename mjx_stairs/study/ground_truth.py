@@ -1,0 +1,255 @@
+"""Policies and physics options checked against MuJoCo itself (`mjx_stairs.sim.box_world`).
+
+Two measurements, both from the same starting states as an MJX evaluation with the same seed:
+- `success_in_ground_truth`: the policy closed-loop on the box staircase in CPU MuJoCo, the
+  evaluation protocol of `evaluate.success_by_level` (same spawns, observation, success and fall
+  rules), one episode per robot;
+- `first_second`: from states on the stairs, the same actions replayed open-loop for one second in
+  the ground truth and in each MJX physics option: base position error, net vertical contact force.
+
+What the ground truth shares with the env is the bookkeeping, not the physics: the observation
+(height map sampled from the atlas grid, so the policy perceives the same staircase), the goal,
+and the success and fall rules. Everything between a PD target and the next state is MuJoCo's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Sequence
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco.mjx._src import support
+
+from mjx_stairs.env import stair_env as envlib
+from mjx_stairs.rl.policy import Policy, policy_action
+from mjx_stairs.sim import box_world as bw
+from mjx_stairs.sim import robot as rb
+from mjx_stairs.study.evaluate import CellSpec, cell_env, cell_records, initial_states
+from terrains.boxes import grid_boxes
+
+TILE_MARGIN = 4
+"""Grid points beyond a tile's own kept around it in its box world (its walls stand inside)."""
+
+
+def env_heights(env: envlib.StairEnv) -> np.ndarray:
+    """[NY, NX] the atlas heights back from the env's MuJoCo model (float32 rounding)."""
+    mj = env.robot.mj_model
+    ny, nx = env.atlas_shape
+    hid = env.robot.ids.hfield_geom
+    data = np.asarray(mj.hfield_data, np.float64).reshape(ny, nx)
+    return data * float(mj.hfield_size[0][2]) + float(mj.geom_pos[hid][2])
+
+
+def tile_model(env: envlib.StairEnv, tile: int, tile_size: float,
+               solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
+               terrain: str = "boxes") -> mujoco.MjModel:
+    """The box world of one atlas tile, in world coordinates (so env states carry over).
+    `terrain="heightfield"`: the atlas heightfield instead of boxes (the shape MJX sees)."""
+    if terrain == "heightfield":
+        return bw.build_model(np.zeros((0, 6)), env.config.robot, solver,
+                              heightfield=(env_heights(env), env.resolution))
+    if terrain != "boxes":
+        raise ValueError(f"terrain must be 'boxes' or 'heightfield', got {terrain!r}")
+    res = env.resolution
+    heights = env_heights(env)
+    n = int(round(tile_size / res))
+    ox, oy = (int(round(v / res)) for v in env.tile_origin[tile])
+    x0, y0 = max(ox - TILE_MARGIN, 0), max(oy - TILE_MARGIN, 0)
+    x1 = min(ox + n + TILE_MARGIN, heights.shape[1])
+    y1 = min(oy + n + TILE_MARGIN, heights.shape[0])
+    boxes = grid_boxes(heights[y0:y1, x0:x1], res, origin=(x0 * res, y0 * res))
+    return bw.build_model(boxes, env.config.robot, solver)
+
+
+@dataclasses.dataclass
+class _Episodes:
+    """Per-robot bookkeeping of the evaluation protocol, in numpy."""
+
+    n: int
+    hold_steps: int
+    success: np.ndarray = None  # type: ignore[assignment]
+    fell: np.ndarray = None  # type: ignore[assignment]
+    count: np.ndarray = None  # type: ignore[assignment]
+    time_to_goal: np.ndarray = None  # type: ignore[assignment]
+
+    def __post_init__(self):
+        self.success = np.zeros(self.n, bool)
+        self.fell = np.zeros(self.n, bool)
+        self.count = np.zeros(self.n, np.int64)
+        self.time_to_goal = np.full(self.n, np.nan)
+
+    @property
+    def active(self) -> np.ndarray:
+        return ~(self.success | self.fell)
+
+
+def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.ndarray):
+    """(close [N], fell [N]) by the env's rules (eval settings: no trunk-contact ending)."""
+    c = env.config
+    pos = qpos[:, :3]
+    x, y = qpos[:, 4], qpos[:, 5]
+    up_z = 1 - 2 * (x * x + y * y)  # R[2, 2]: the body's z axis against the world's
+    tilted = up_z < np.cos(c.max_tilt)
+    ground = np.asarray(env.terrain_height(jnp.asarray(pos[:, 0]), jnp.asarray(pos[:, 1])))
+    too_low = pos[:, 2] - ground < c.min_base_height
+    wx, wy = (np.asarray(env.atlas_shape[::-1]) - 1) * env.resolution
+    outside = (pos[:, 0] < 0) | (pos[:, 1] < 0) | (pos[:, 0] > wx) | (pos[:, 1] > wy)
+    bad = ~(np.all(np.isfinite(qpos), 1) & np.all(np.isfinite(qvel), 1))
+    planar = np.linalg.norm(goal[:, :2] - pos[:, :2], axis=1)
+    close = (planar < c.success_distance) & (np.linalg.norm(qvel[:, :2], axis=1) < c.success_speed)
+    return close, tilted | too_low | outside | bad
+
+
+def success_in_ground_truth(
+    policy: Policy, spec: CellSpec, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
+    nthread: int | None = None, terrain: str = "boxes",
+) -> dict[str, Any]:
+    """`evaluate.success_by_cell` with CPU MuJoCo on box stairs in place of MJX.
+
+    Robots start from the same states as the MJX evaluation of the same spec (same seed). A
+    robot stops once it has succeeded or fallen (success is final in both).
+    """
+    env = cell_env(policy, spec)
+    state = initial_states(env, spec)
+    info = {k: v for k, v in state.info.items() if k != "final_obs"}
+    tiles = np.asarray(info["tile"])
+    B = tiles.shape[0]
+    models = {int(t): tile_model(env, int(t), spec.tile_size, solver, terrain)
+              for t in np.unique(tiles)}
+    batch = bw.Batch([models[int(t)] for t in tiles], np.asarray(state.pipeline_state.qpos),
+                     nthread=nthread)
+    goal = np.asarray(env.goals)[tiles]
+    observe = jax.jit(jax.vmap(env.observe))
+    act = jax.jit(lambda o: policy_action(policy, o))
+    c = env.config
+    ep = _Episodes(B, max(1, int(round(c.success_hold_s / env.dt))))
+    last_action = np.zeros((B, 12), np.float32)
+    t0 = time.time()
+    for k in range(env.episode_steps):
+        active = ep.active
+        if not active.any():
+            break
+        info["last_action"] = jnp.asarray(last_action)
+        obs = observe(jnp.asarray(batch.qpos, jnp.float32), jnp.asarray(batch.qvel, jnp.float32),
+                      info)
+        a = np.clip(np.asarray(act(obs)), -c.action_clip, c.action_clip)
+        batch.step(rb.NOMINAL_JOINT_POS + c.robot.action_scale * a, c.decimation, active)
+        last_action = np.where(active[:, None], a, last_action)
+        close, fell = _endings(env, batch.qpos, batch.qvel, goal)
+        ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)
+        done_now = active & (ep.count >= ep.hold_steps)
+        ep.time_to_goal[done_now] = (k + 1) * env.dt
+        ep.success |= done_now
+        ep.fell |= active & ~done_now & fell
+    batch.close()
+    per_cell = ep.time_to_goal.reshape(len(spec.cells), -1)
+    return cell_records(
+        spec, ep.success, ep.fell, physics=f"mujoco_cpu_{terrain}",
+        solver=dataclasses.asdict(solver), wall_s=time.time() - t0,
+        mean_time_to_goal_s=[float(np.nanmean(t)) if np.isfinite(t).any() else None
+                             for t in per_cell],
+    )
+
+
+# ----------------------------------------------------------------------------- first second
+
+
+def _mjx_vertical_force(env: envlib.StairEnv, data) -> jax.Array:
+    """|Net vertical contact force| (N) on one robot from its MJX data."""
+    ncon = data._impl.contact.dist.shape[0]
+    if ncon == 0:
+        return jnp.zeros(())
+    m = env.robot.mjx_model  # contact ids are static: efc addresses are host arrays in MJX
+    f = jnp.stack([support.contact_force(m, data, i, True)[2] for i in range(ncon)])
+    return jnp.abs(jnp.sum(jnp.where(data._impl.contact.dist < 0, f, 0.0)))
+
+
+def first_second(
+    policy: Policy, spec: CellSpec, options: dict[str, Sequence[str]], warmup_s: float = 2.0,
+    horizon_s: float = 1.0, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
+) -> dict[str, Any]:
+    """From the same states on the stairs, the same actions for `horizon_s` in the ground truth
+    and in each MJX option ({name: env overrides}): base position error and contact force.
+
+    The starting states: the spec's robots after `warmup_s` of the policy in the ground truth.
+    The actions: the policy's, closed-loop in the ground truth; each MJX option replays them
+    open-loop. Per option: the mean and 90th percentile over robots of the base position error
+    at each policy step, and the mean |difference| of the total net vertical contact force.
+    """
+    env = cell_env(policy, spec)
+    state = initial_states(env, spec)
+    info = {k: v for k, v in state.info.items() if k != "final_obs"}
+    tiles = np.asarray(info["tile"])
+    models = {int(t): tile_model(env, int(t), spec.tile_size, solver) for t in np.unique(tiles)}
+    robots = [(models[int(t)], mujoco.MjData(models[int(t)])) for t in tiles]
+    for (_, d), q in zip(robots, np.asarray(state.pipeline_state.qpos), strict=True):
+        d.qpos[:] = q
+    observe = jax.jit(jax.vmap(env.observe))
+    act = jax.jit(lambda o: policy_action(policy, o))
+    c = env.config
+    warm, steps = int(round(warmup_s / env.dt)), int(round(horizon_s / env.dt))
+    start = None
+    actions, gt_pos, gt_force = [], [], []
+    last_action = np.zeros((len(robots), 12), np.float32)
+    for k in range(warm + steps):
+        qpos = np.stack([d.qpos.copy() for _, d in robots])
+        qvel = np.stack([d.qvel.copy() for _, d in robots])
+        if k == warm:
+            start = (qpos, qvel, last_action.copy())
+        info["last_action"] = jnp.asarray(last_action)
+        obs = observe(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32), info)
+        a = np.clip(np.asarray(act(obs)), -c.action_clip, c.action_clip)
+        target = rb.NOMINAL_JOINT_POS + c.robot.action_scale * a
+        for (m, d), q_target in zip(robots, target, strict=True):
+            d.ctrl[:] = q_target
+            for _ in range(c.decimation):
+                mujoco.mj_step(m, d)
+        last_action = a
+        if k >= warm:
+            actions.append(a)
+            gt_pos.append(np.stack([d.qpos[:3].copy() for _, d in robots]))
+            gt_force.append([bw.contact_summary(m, d)["vertical_force"] for m, d in robots])
+    gt_pos, gt_force = np.array(gt_pos), np.array(gt_force)  # [T, B, 3], [T, B]
+    cell = spec.cells[0]
+    out = {"robots": len(robots), "warmup_s": warmup_s, "horizon_s": horizon_s,
+           "cell": {"family": cell[0], "schedule": cell[1], "level": cell[2] + 1},
+           "gt_mean_vertical_force_n": float(gt_force.mean()), "options": {}}
+    for name, overrides in options.items():
+        pos, force = replay_in_mjx(policy, dataclasses.replace(spec, env_overrides=tuple(
+            overrides)), start, actions)
+        err = np.linalg.norm(pos - gt_pos, axis=-1)  # [T, B]
+        out["options"][name] = {
+            "overrides": list(overrides),
+            "pos_error_mean_m": [float(e) for e in err.mean(1)],
+            "pos_error_p90_m": [float(e) for e in np.percentile(err, 90, axis=1)],
+            "pos_error_at_horizon_mean_m": float(err[-1].mean()),
+            "pos_error_at_horizon_p90_m": float(np.percentile(err[-1], 90)),
+            "force_abs_diff_mean_n": float(np.abs(force - gt_force).mean()),
+            "mean_vertical_force_n": float(force.mean()),
+        }
+    return out
+
+
+def replay_in_mjx(policy: Policy, spec: CellSpec, start, actions):
+    """Positions [T, B, 3] and net vertical contact forces [T, B] in the MJX physics of `spec`'s
+    overrides, replaying `actions` [T][B, 12] from `start` = (qpos, qvel, last action) on the
+    tiles the spec's seed places its robots on."""
+    env = cell_env(policy, spec)
+    state0 = initial_states(env, spec)
+    qpos, qvel, last = start
+    data = state0.pipeline_state.replace(qpos=jnp.asarray(qpos, jnp.float32),
+                                         qvel=jnp.asarray(qvel, jnp.float32))
+    st = state0.replace(pipeline_state=data, info=dict(state0.info, last_action=jnp.asarray(last)))
+
+    def one(s, a):
+        s = jax.vmap(env.step)(s, a)
+        force = jax.vmap(lambda d: _mjx_vertical_force(env, d))(s.pipeline_state)
+        return s, (s.pipeline_state.qpos[:, :3], force)
+
+    _, (pos, force) = jax.jit(lambda s, a: jax.lax.scan(one, s, a))(
+        st, jnp.asarray(np.stack(actions)))
+    return np.asarray(pos, np.float64), np.asarray(force, np.float64)

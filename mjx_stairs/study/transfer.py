@@ -1,0 +1,150 @@
+"""Transfer between stair shapes: every model on every family, and the paper's transferability.
+
+Transferability of a model trained on A to family B = S_A(B) / S_B(B), the success of A's model
+on B over the success of B's own model on B, each averaged over test levels 3 and 4 (paper).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjx_stairs import atomic
+from mjx_stairs.config import ConfigError, read_toml
+from mjx_stairs.rl.policy import load_policy
+from mjx_stairs.study import evaluate
+
+PAPER_TABLE1 = {  # U-shaped model on each family, test levels 3 and 4 (%)
+    "u_shaped": (91.3, 87.7),
+    "straight": (98.0, 96.3),
+    "l_shaped": (75.7, 72.1),
+    "spiral": (44.7, 25.8),
+}
+PAPER_TABLE2 = {  # each family's model on U-shaped stairs, levels 3 and 4 (%)
+    "straight": (2.0, 1.0),
+    "l_shaped": (0.7, 2.0),
+    "spiral": (1.7, 0.0),
+}
+
+
+def load_models(path: str | os.PathLike) -> dict[str, str]:
+    """experiments/transfer_matrix.toml: a [models] table {family: policy path}."""
+    path = Path(path)
+    data = read_toml(path)
+    models = data.get("models")
+    if not isinstance(models, dict) or not models:
+        raise ConfigError(f'{path}: needs a [models] table of family = "policy.npz"')
+    import terrains
+
+    for family, p in models.items():
+        if family not in terrains.FAMILIES:
+            raise ConfigError(f"{path}: models.{family}: unknown stair family")
+        if not isinstance(p, str):
+            raise ConfigError(f"{path}: models.{family}: expected a path string")
+    return dict(models)
+
+
+def matrix(
+    models: dict[str, str], spec: evaluate.EvalSpec, out_dir: str | os.PathLike | None = None
+) -> dict[str, Any]:
+    """Success of each model (rows) on each family (columns) at spec.levels; transferability."""
+    families = list(models)
+    success: dict[str, dict[str, dict[str, Any]]] = {}
+    for src, path in models.items():
+        policy = load_policy(path)
+        success[src] = {}
+        for dst in families:
+            success[src][dst] = evaluate.success_by_level(
+                policy, dataclasses.replace(spec, family=dst)
+            )
+    mean = {s: {d: float(np.mean(success[s][d]["success"])) for d in families} for s in families}
+    transfer = transferability(mean)
+    out = {
+        "levels": [lv + 1 for lv in spec.levels],
+        "models": models,
+        "success": success,
+        "mean_success": mean,
+        "transferability": transfer,
+        "paper": {"table1_u_model": PAPER_TABLE1, "table2_onto_u": PAPER_TABLE2},
+        **({"env_overrides": list(spec.env_overrides)} if spec.env_overrides else {}),
+    }
+    if out_dir is not None:
+        d = Path(out_dir)
+        d.mkdir(parents=True, exist_ok=True)
+        atomic.write_text(d / "transfer.json", json.dumps(out, indent=2))
+        atomic.write_text(d / "transfer.md", markdown(out))
+    return out
+
+
+def transferability(mean: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
+    """S_model(stairs) / S_stairs-model(stairs) for every (model, stairs) pair of a square
+    {model: {stairs: mean success}} table; NaN where the stairs' own model never succeeds."""
+    return {
+        s: {d: (mean[s][d] / mean[d][d] if mean[d][d] > 0 else float("nan")) for d in row}
+        for s, row in mean.items()
+    }
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The success matrix and the transferability matrix as Markdown tables."""
+    fams = list(result["models"])
+    lv = ", ".join(f"L{v}" for v in result["levels"])
+
+    def table(values: dict[str, dict[str, float]]) -> list[str]:
+        rows = ["| model \\ stairs | " + " | ".join(fams) + " |", "|---|" + "---|" * len(fams)]
+        for s in fams:
+            rows.append(f"| {s} | " + " | ".join(f"{100 * values[s][d]:.1f}" for d in fams) + " |")
+        return rows
+
+    lines = [f"Success (%), mean over test levels {lv}; rows: trained on, columns: tested on."]
+    if result.get("env_overrides"):
+        lines.append("Every model evaluated with " + ", ".join(result["env_overrides"]) + ".")
+    lines.append("")
+    lines += table(result["mean_success"])
+    lines += ["", "Transferability S_model(stairs) / S_stairs-model(stairs):", ""]
+    lines += table(result["transferability"])
+    return "\n".join(lines) + "\n"
+
+
+EXPERIMENTS = {
+    "u_shaped": "stage2_u",
+    "straight": "straight",
+    "l_shaped": "l_shaped",
+    "spiral": "spiral",
+}
+"""The experiment file that trains each family's model (experiments/<name>.toml)."""
+
+
+def run_pipeline(spec: evaluate.EvalSpec, force: bool = False) -> dict[str, Any]:
+    """Train every family's model that is not published yet (stage 1 first if needed), then the
+    matrix. On the CPU the experiments run their [cpu] presets under results/cpu_preset/."""
+    import jax
+
+    from mjx_stairs.rl import runner as train
+    from mjx_stairs.study import experiment
+
+    cpu = jax.default_backend() == "cpu"
+    models = {}
+    for name in ("stage1",) + tuple(EXPERIMENTS.values()):
+        config, _ = experiment.load(f"experiments/{name}.toml")
+        dest = Path(config.publish_dir)
+        if not (dest / "policy.npz").exists() or force:
+            print(f"[transfer] {name}: training{' (CPU preset)' if cpu else ''}", flush=True)
+            result = train.run(config, experiment.make_env(config))
+            experiment.publish(result.run_dir, dest, result.metrics, result.stop_reason)
+        if name != "stage1":
+            family = config.terrain.families[0]
+            models[family] = str(dest / "policy.npz")
+    if cpu:
+        spec = dataclasses.replace(
+            spec, robots_per_level=min(spec.robots_per_level, 8), resolution=0.05
+        )
+    out = Path(models["u_shaped"]).parent.parent / "transfer"
+    result = matrix(models, spec, out)
+    print(markdown(result), flush=True)
+    return result

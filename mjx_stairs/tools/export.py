@@ -1,0 +1,324 @@
+"""Ship a policy: ONE ONNX graph (normaliser -> CNN encoder -> actor MLP) and a JSON sidecar.
+
+The graph maps the raw observation `obs` [batch, 490] (the layout of mjx_stairs.env, no noise
+added) to the mean action `action` [batch, 12], exactly as `policy.policy_action` does:
+
+    x = clip((obs - mean) / (std + 0.01), -clip, clip)               # the actor's normaliser
+    vec, map = x[:, :49], x[:, 49:].reshape(batch, 1, 21, 21)      # rows = y, columns = x
+    3 x (Conv 3x3 pads 1 -> Elu), MaxPool 2 after all but the last   # 21 -> 10 -> 5
+    adaptive average pool to 2 x 2 (torch bins, overlapping: rows/cols [0:3] and [2:5])
+    NCHW -> NHWC flatten -> Gemm -> Elu = latent [batch, 128]
+    actor MLP on concat(latent, vec): Gemm + Elu per hidden layer, Gemm out
+
+Built with onnx.helper at opset 17 (Sub, Div, Clip, Slice, Reshape, Conv, Elu, MaxPool,
+ReduceMean, Concat, Transpose, Flatten, Gemm). The sidecar (`<file>.json`) is what a robot-side
+runner needs beside the graph: the observation layout with units, the joint order, the nominal
+pose, the action -> PD target rule, PD gains, torque limits, rates and the height-map geometry.
+Both files are written through a temporary file and os.replace.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from mjx_stairs import atomic
+from mjx_stairs.rl.policy import (
+    STD_EPS,
+    Policy,
+    load_policy,
+    normaliser_constants,
+    policy_action,
+)
+from mjx_stairs.sim import robot as rb
+from mjx_stairs.study.evaluate import env_config_of
+
+OPSET = 17
+
+# The observation vector of mjx_stairs.env (StairEnv._observe), in order: (name, size, unit,
+# description). The height map follows.
+OBS_VECTOR = (
+    ("base_lin_vel", 3, "m/s", "base linear velocity in the base (body) frame"),
+    ("base_ang_vel", 3, "rad/s", "base angular velocity in the base frame (IMU gyro)"),
+    ("projected_gravity", 3, "1", "unit gravity vector (0, 0, -1) in the base frame"),
+    ("joint_pos", 12, "rad", "joint positions minus the nominal pose, joint_names order"),
+    ("joint_vel", 12, "rad/s", "joint velocities, joint_names order"),
+    ("last_action", 12, "1", "the previous policy action, clipped to +-action_clip"),
+    ("goal", 4, "m, m, m, rad",
+     "goal position minus base position in the base frame (x, y, z), then the yaw error "
+     "goal_yaw - base_yaw wrapped to [-pi, pi)"),
+)
+NOISE_GROUP = {"base_lin_vel": "lin_vel", "base_ang_vel": "ang_vel", "projected_gravity": "gravity",
+               "joint_pos": "joint_pos", "joint_vel": "joint_vel", "height_map": "height"}
+
+
+class ExportError(RuntimeError):
+    """The policy cannot be exported (missing onnx, unsupported layout)."""
+
+
+def _onnx():
+    try:
+        import onnx
+        from onnx import helper, numpy_helper
+    except ImportError:
+        raise ExportError("ONNX export needs the onnx package: pip install 'mjx_stairs[export]'"
+                          ) from None
+    return onnx, helper, numpy_helper
+
+
+def _adaptive_bins(n: int, out: int) -> list[tuple[int, int]]:
+    """torch AdaptiveAvgPool bins, as networks._adaptive_avg_pool computes them."""
+    return [((i * n) // out, -((-(i + 1) * n) // out)) for i in range(out)]
+
+
+def build_onnx(policy: Policy, opset: int = OPSET):
+    """The policy's normaliser, encoder and actor as an onnx.ModelProto (checked)."""
+    onnx, helper, numpy_helper = _onnx()
+    from onnx import TensorProto
+
+    params = jax.tree_util.tree_map(lambda x: np.asarray(x, np.float32), policy.params)
+    layout = policy.layout
+    D, A = layout.obs_size, policy.action_size
+    nodes, inits = [], []
+    counter = [0]
+
+    def name(prefix: str) -> str:
+        counter[0] += 1
+        return f"{prefix}_{counter[0]}"
+
+    def const(prefix: str, value) -> str:
+        n = name(prefix)
+        inits.append(numpy_helper.from_array(np.asarray(value), n))
+        return n
+
+    def node(op: str, inputs: list[str], out: str | None = None, **attrs) -> str:
+        out = out or name(op.lower())
+        nodes.append(helper.make_node(op, inputs, [out], name=name(f"n_{op}"), **attrs))
+        return out
+
+    x = "obs"
+    norm = normaliser_constants(policy)
+    if norm is not None:
+        mean, denom, clip = norm
+        x = node("Sub", [x, const("norm_mean", mean)])
+        x = node("Div", [x, const("norm_std_plus_eps", denom)])
+        if clip > 0:
+            x = node("Clip", [x, const("clip_lo", np.float32(-clip)),
+                              const("clip_hi", np.float32(clip))])
+
+    if layout.map_shape:
+        H, W = (int(s) for s in layout.map_shape)
+        i64 = lambda v: np.asarray(v, np.int64)
+        vec = node("Slice", [x, const("s0", i64([0])), const("s1", i64([layout.n_vec])),
+                             const("ax", i64([1]))])
+        m = node("Slice", [x, const("s0", i64([layout.n_vec])), const("s1", i64([D])),
+                           const("ax", i64([1]))])
+        m = node("Reshape", [m, const("shape", i64([-1, 1, H, W]))])
+        convs = params["encoder"]["conv"]
+        h, w = H, W
+        for i, p in enumerate(convs):
+            k = p["w"].shape[0]
+            if p["w"].shape[1] != k or k % 2 == 0:
+                raise ExportError(f"conv {i}: only odd square kernels are supported")
+            wt = np.ascontiguousarray(np.transpose(p["w"], (3, 2, 0, 1)))  # HWIO -> OIHW
+            pad = (k - 1) // 2
+            m = node("Conv", [m, const(f"conv{i}_w", wt), const(f"conv{i}_b", p["b"])],
+                     kernel_shape=[k, k], pads=[pad] * 4, strides=[1, 1])
+            m = node("Elu", [m], alpha=1.0)
+            if i < len(convs) - 1:
+                m = node("MaxPool", [m], kernel_shape=[2, 2], strides=[2, 2])
+                h, w = h // 2, w // 2
+        c = int(convs[-1]["w"].shape[-1])
+        n_flat = int(params["encoder"]["proj"]["w"].shape[0])
+        side = int(round((n_flat // c) ** 0.5))
+        if side * side * c != n_flat:
+            raise ExportError(f"encoder projection expects {n_flat} inputs, not a square pool")
+        rows = []
+        for r0, r1 in _adaptive_bins(h, side):
+            cols = []
+            for c0, c1 in _adaptive_bins(w, side):
+                cell = node("Slice", [m, const("s0", i64([r0, c0])), const("s1", i64([r1, c1])),
+                                      const("ax", i64([2, 3]))])
+                cols.append(node("ReduceMean", [cell], axes=[2, 3], keepdims=1))
+            rows.append(node("Concat", cols, axis=3))
+        pooled = node("Concat", rows, axis=2)  # [N, C, side, side]
+        pooled = node("Transpose", [pooled], perm=[0, 2, 3, 1])  # NHWC, as networks.encode
+        flat = node("Flatten", [pooled], axis=1)
+        proj = params["encoder"]["proj"]
+        latent = node("Gemm", [flat, const("proj_w", proj["w"]), const("proj_b", proj["b"])])
+        latent = node("Elu", [latent], alpha=1.0)
+        x = node("Concat", [latent, vec], axis=1)
+
+    layers = params["actor"]
+    for i, p in enumerate(layers):
+        last = i == len(layers) - 1
+        x = node("Gemm", [x, const(f"actor{i}_w", p["w"]), const(f"actor{i}_b", p["b"])],
+                 out="action" if last else None)
+        if not last:
+            x = node("Elu", [x], alpha=1.0)
+
+    graph = helper.make_graph(
+        nodes, "mjx_stairs_policy",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["batch", D])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, ["batch", A])],
+        initializer=inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", opset)],
+                              producer_name="mjx_stairs", producer_version="0.1.0")
+    model.ir_version = min(model.ir_version, 8)  # opset 17 <-> IR 8: loadable by older runtimes
+    model.doc_string = ("raw observation [batch, %d] -> mean action [batch, %d]; see the JSON "
+                        "sidecar for the layout" % (D, A))
+    meta = policy.metadata
+    for k, v in (("iteration", meta.get("iteration")), ("env_steps", meta.get("env_steps"))):
+        if v is not None:
+            entry = model.metadata_props.add()
+            entry.key, entry.value = k, str(v)
+    onnx.checker.check_model(model)
+    return model
+
+
+def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
+    """What a runner needs beside the graph, as a JSON-serialisable dict."""
+    cfg = env_config_of(policy)
+    layout = policy.layout
+    hm = cfg.height_map
+    n_vec = sum(n for _, n, _, _ in OBS_VECTOR)
+    if layout.n_vec != n_vec or tuple(layout.map_shape) not in ((hm.size, hm.size),):
+        raise ExportError(
+            f"policy layout (vec {layout.n_vec}, map {tuple(layout.map_shape)}) is not the stair "
+            f"env's (vec {n_vec}, map {(hm.size, hm.size)})"
+        )
+    noise = cfg.noise
+    entries, i = [], 0
+    for nm, n, unit, desc in OBS_VECTOR:
+        group = NOISE_GROUP.get(nm)
+        if nm == "goal" and cfg.goal_mode == "waypoint":
+            desc = (
+                f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
+                "further along the stair centre-line than the base's projection on it, with the "
+                "centre-line's heading there as its yaw, and the final goal (position and yaw) "
+                f"once that is nearer than {cfg.waypoint_lookahead_m:g} m along the line "
+                "(mjx_stairs.env.stair_env.StairEnv.goal_target)"
+            )
+        entries.append({"name": nm, "start": i, "stop": i + n, "unit": unit,
+                        "description": desc,
+                        "training_noise": getattr(noise, group) if group else 0.0})
+        i += n
+    half = 0.5 * (hm.size - 1) * hm.spacing
+    entries.append({
+        "name": "height_map", "start": i, "stop": i + hm.size * hm.size, "unit": "m",
+        "description": (f"{hm.size} x {hm.size} heights, row-major: index = {i} + row * "
+                        f"{hm.size} + col; value = clip(base_z - terrain_z(p) - {hm.offset}, "
+                        f"-{hm.clip}, {hm.clip})"),
+        "training_noise": noise.height,
+    })
+    robot = cfg.robot
+    dt = robot.timestep * cfg.decimation
+    norm = normaliser_constants(policy)
+    meta = policy.metadata
+    out: dict[str, Any] = {
+        "format": "mjx_stairs policy sidecar v1",
+        "onnx": {
+            "input": {"name": "obs", "shape": ["batch", layout.obs_size], "dtype": "float32",
+                      "what": "raw observation, NOT normalised (the graph normalises)"},
+            "output": {"name": "action", "shape": ["batch", policy.action_size],
+                       "dtype": "float32", "what": "mean action (deterministic)"},
+            "opset": OPSET,
+            "sha256": hashlib.sha256(onnx_bytes).hexdigest() if onnx_bytes else None,
+        },
+        "observation": {
+            "size": layout.obs_size,
+            "layout": entries,
+            "scales": "none: every entry is in the SI unit given; the graph's normaliser "
+                      "(mean/std from training) does all scaling",
+            "noise": (f"the graph adds no noise; training added uniform noise of the given "
+                      f"half-widths ({'on' if noise.enabled else 'off'} in training)"),
+            "frames": "base (body) frame: x forward, y left, z up; world z up",
+        },
+        "normalizer": None if norm is None else {
+            "applied_in_graph": True, "clip": norm[2], "std_eps": STD_EPS,
+            "formula": "clip((obs - mean) / (std + std_eps), -clip, clip)",
+        },
+        "height_map": {
+            "size": [hm.size, hm.size], "spacing_m": hm.spacing, "offset_m": hm.offset,
+            "clip_m": hm.clip,
+            "frame": "centred on the base position, rotated by the base yaw only (gravity "
+                     "aligned, no pitch/roll)",
+            "rows": f"y in the yaw frame (left +), from {-half:g} m (row 0) to {half:g} m",
+            "cols": f"x in the yaw frame (forward +), from {-half:g} m (col 0) to {half:g} m",
+            "value": f"base_z - terrain_z - {hm.offset}, clipped to +-{hm.clip} m",
+        },
+        "joints": {
+            "names": list(rb.JOINT_NAMES),
+            "nominal_pos_rad": [float(v) for v in rb.NOMINAL_JOINT_POS],
+            "pos_limits_rad": rb.JOINT_RANGE.tolist(),
+            "velocity_limit_rad_s": rb.VELOCITY_LIMIT,
+        },
+        "action": {
+            "size": policy.action_size,
+            "clip": cfg.action_clip,
+            "scale": robot.action_scale,
+            "rule": "q_target = nominal_pos + scale * clip(action, -clip, clip); feed the "
+                    "clipped action back as last_action",
+        },
+        "pd": {
+            "kp": robot.kp, "kd": robot.kd,
+            "torque_limit_nm": [float(v) for v in rb.TORQUE_LIMIT * robot.torque_scale],
+            "law": "tau = clip(kp * (q_target - q) - kd * qd, -torque_limit, torque_limit), "
+                   "evaluated every physics step",
+        },
+        "rates": {
+            "control_hz": 1.0 / dt, "control_dt_s": dt,
+            "physics_dt_s": robot.timestep, "physics_steps_per_action": cfg.decimation,
+        },
+        "policy": {
+            "iteration": meta.get("iteration"),
+            "env_steps": meta.get("env_steps"),
+            "network": meta.get("network"),
+            "config": meta.get("config"),
+        },
+    }
+    return out
+
+
+def export(checkpoint: str | os.PathLike, onnx_path: str | os.PathLike) -> dict[str, Any]:
+    """Write `onnx_path` and `onnx_path + '.json'`; returns the sidecar."""
+    policy = load_policy(checkpoint)
+    return export_policy(policy, onnx_path)
+
+
+def export_policy(policy: Policy, onnx_path: str | os.PathLike) -> dict[str, Any]:
+    onnx_path = Path(onnx_path)
+    data = build_onnx(policy).SerializeToString()
+    side = sidecar(policy, data)
+    atomic.write_bytes(onnx_path, data)
+    atomic.write_text(sidecar_path(onnx_path), json.dumps(side, indent=2) + "\n")
+    return side
+
+
+def sidecar_path(onnx_path: str | os.PathLike) -> Path:
+    p = Path(onnx_path)
+    return p.with_name(p.name + ".json")
+
+
+def verify(policy: Policy, onnx_path: str | os.PathLike, n: int = 64,
+           seed: int = 0) -> float:
+    """Max |onnxruntime - JAX| over `n` random observations (normal, std 3: many beyond the
+    normaliser's clip)."""
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        raise ExportError("verifying needs onnxruntime: pip install 'mjx_stairs[export]'"
+                          ) from None
+    rng = np.random.default_rng(seed)
+    obs = (3.0 * rng.standard_normal((n, policy.layout.obs_size))).astype(np.float32)
+    sess = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+    got = sess.run(["action"], {"obs": obs})[0]
+    want = np.asarray(jax.jit(lambda o: policy_action(policy, o))(obs))
+    return float(np.max(np.abs(got - want)))

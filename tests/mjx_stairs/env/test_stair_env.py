@@ -1,0 +1,383 @@
+"""The stair env on MJX (CPU): stepping, height map, terminations, rewards, curriculum, success."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import terrains
+from mjx_stairs.env import curriculum as cur
+from mjx_stairs.env import rewards as rw
+from mjx_stairs.env.stair_env import EnvConfig, StairEnv
+
+B = 8
+LEVELS = (0, 6)  # pyramid level 1 is flat, level 7 has 0.1 m risers
+
+
+@pytest.fixture(scope="session")
+def atlas():
+    return terrains.build_atlas(
+        ["pyramid"],
+        "train",
+        levels=list(LEVELS),
+        variants_per_family=1,
+        resolution=0.05,
+        tile_size=10.0,
+        border=1.0,
+    )
+
+
+@pytest.fixture(scope="session")
+def env(atlas):
+    return StairEnv(atlas, EnvConfig(episode_length_s=6.0))
+
+
+@pytest.fixture(scope="session")
+def fns(env):
+    return {
+        "reset_at": jax.jit(jax.vmap(env.reset_at)),
+        "step": jax.jit(jax.vmap(env.step)),
+    }
+
+
+def _reset(env, fns, rows, seed=0):
+    keys = jax.random.split(jax.random.PRNGKey(seed), B)
+    return fns["reset_at"](keys, jnp.asarray(rows, jnp.int32), jnp.zeros(B, jnp.int32))
+
+
+def test_contact_layout_matches_a_forward_pass(env):
+    from mujoco import mjx
+
+    mx = env.robot.mjx_model
+    d = jax.jit(mjx.forward)(mx, mjx.make_data(mx))
+    geom = np.asarray(d._impl.contact.geom)
+    for group, ids in (("foot", env._ids.foot_geoms), ("trunk", env._ids.trunk_geoms)):
+        rows = env._contact_rows[group]
+        for k, g in enumerate(ids):
+            assert np.all(geom[rows[k]] == [env._ids.hfield_geom, g])
+
+
+def test_reset_and_step_100_steps(env, fns):
+    state = _reset(env, fns, [0, 1] * 4)
+    rng = jax.random.PRNGKey(1)
+    for _ in range(100):
+        rng, k = jax.random.split(rng)
+        state = fns["step"](state, jax.random.uniform(k, (B, 12), minval=-1, maxval=1))
+    n = env.observation_size["state"][0]
+    for key in ("state", "privileged_state"):
+        assert state.obs[key].shape == (B, n) and state.obs[key].dtype == jnp.float32
+        assert not np.isnan(np.asarray(state.obs[key])).any()
+    assert state.reward.shape == (B,) and not np.isnan(np.asarray(state.reward)).any()
+    assert state.done.shape == (B,)
+    for term in rw.active_terms(env.config.rewards):
+        assert f"reward/{term}" in state.metrics
+    assert state.info["final_obs"]["privileged_state"].shape == (B, n)
+    assert state.pipeline_state.qpos.shape == (B, 19)
+
+
+def test_a_robot_whose_physics_blows_up_is_reset_and_the_others_step_on(env, fns):
+    """The NaN guard: a robot whose step ends non-finite (here a joint speed of 1e20 rad/s)
+    terminates with reward 0 and comes back reset; every other robot's step is the one it takes
+    without the bad robot beside it; and the next step of all of them is finite throughout."""
+    state = _reset(env, fns, [0] * B)
+    ps = state.pipeline_state
+    bad = state.replace(pipeline_state=ps.replace(qvel=ps.qvel.at[0, 6:].set(1e20)))
+    action = jnp.zeros((B, env.action_size))
+    clean, hit = fns["step"](state, action), fns["step"](bad, action)
+    assert float(hit.metrics["nan_reset"][0]) == 1.0 and float(hit.done[0]) == 1.0
+    assert float(hit.reward[0]) == 0.0
+    assert not np.any(np.asarray(clean.metrics["nan_reset"]))
+    for a, b in ((hit.pipeline_state.qpos, clean.pipeline_state.qpos), (hit.reward, clean.reward),
+                 (hit.obs["state"], clean.obs["state"])):
+        np.testing.assert_array_equal(np.asarray(a)[1:], np.asarray(b)[1:])
+    fresh = np.asarray(hit.pipeline_state.qpos[0])
+    assert np.all(np.isfinite(fresh)) and np.allclose(fresh[7:], env._nominal, atol=0.2)
+    assert np.all(np.isfinite(np.asarray(hit.pipeline_state.ctrl)))
+    for obs in (hit.obs, hit.info["final_obs"]):  # the final obs feeds the value bootstrap
+        assert all(np.all(np.isfinite(np.asarray(v))) for v in obs.values())
+    after = fns["step"](hit, action)
+    for leaf in (after.pipeline_state.qpos, after.pipeline_state.qvel, after.pipeline_state.xpos,
+                 after.reward, *after.obs.values(), *after.metrics.values()):
+        assert np.all(np.isfinite(np.asarray(leaf)))
+    assert not np.any(np.asarray(after.metrics["nan_reset"]))
+
+
+def test_height_map_matches_numpy_reference(env, atlas):
+    rng = np.random.default_rng(0)
+    t = atlas.cols * 1  # the stair tile (level 7)
+    ox, oy = atlas.origin[t]
+    pos = np.stack(
+        [ox + rng.uniform(2, 8, 16), oy + rng.uniform(2, 8, 16), rng.uniform(0.3, 1.5, 16)], -1
+    )
+    yaw = rng.uniform(-np.pi, np.pi, 16)
+    got = np.asarray(
+        jax.jit(jax.vmap(env.height_map, in_axes=(0, 0, None)))(
+            jnp.asarray(pos, jnp.float32), jnp.asarray(yaw, jnp.float32), t
+        )
+    )
+    hm = env.config.height_map
+    half = 0.5 * (hm.size - 1) * hm.spacing
+    gx, gy = np.meshgrid(np.linspace(-half, half, hm.size), np.linspace(-half, half, hm.size))
+    for i in range(16):
+        c, s = np.cos(yaw[i]), np.sin(yaw[i])
+        extent = (atlas.tile_points - 1) * atlas.resolution  # the map reads this tile alone
+        wx = np.clip(pos[i, 0] + c * gx - s * gy, ox, ox + extent)
+        wy = np.clip(pos[i, 1] + s * gx + c * gy, oy, oy + extent)
+        ref = terrains.sample_heights(atlas.heights, atlas.resolution, wx, wy)
+        ref = np.clip(pos[i, 2] - ref - hm.offset, -hm.clip, hm.clip).ravel()
+        np.testing.assert_allclose(got[i], ref, atol=2e-4)
+    assert np.ptp(got) > 0.1  # the tile has stairs in view: the map is not flat
+
+
+def test_nominal_pose_survives_5s_and_tilted_robot_terminates(env, fns):
+    state = _reset(env, fns, [0] * B)  # flat tile
+    zero = jnp.zeros((B, 12))
+    for _ in range(int(5.0 / env.dt)):
+        state = fns["step"](state, zero)
+        assert not np.any(np.asarray(state.done)), "a standing robot was ended"
+    z = np.asarray(state.pipeline_state.qpos[:, 2])
+    assert np.all((z > 0.2) & (z < 0.4))
+
+    tilted = _reset(env, fns, [0] * B, seed=3)
+    angle = env.config.max_tilt + 0.3
+    quat = jnp.array([np.cos(angle / 2), np.sin(angle / 2), 0.0, 0.0])  # roll past the limit
+    qpos = tilted.pipeline_state.qpos.at[:4, 3:7].set(quat)
+    tilted = tilted.replace(pipeline_state=tilted.pipeline_state.replace(qpos=qpos))
+    after = fns["step"](tilted, zero)
+    np.testing.assert_array_equal(np.asarray(after.metrics["terminated"]), [1] * 4 + [0] * 4)
+    assert np.all(np.asarray(after.info["truncation"]) == 0)
+    assert np.all(np.asarray(after.info["step"])[:4] == 0)  # auto-reset into a new episode
+
+
+def test_episode_end_moves_level_and_reports_success(env, fns):
+    state = _reset(env, fns, [0] * B)
+    # Robots 0-3 stand still on the goal, 4-7 stay at the spawn; the episode is about to time out.
+    goal = env._goal[state.info["tile"]]
+    qpos = state.pipeline_state.qpos
+    at_goal = qpos.at[:, 0:2].set(goal[:, :2]).at[:, 2].set(goal[:, 2] + 0.30)
+    yaw = goal[:, 3]
+    at_goal = at_goal.at[:, 3:7].set(
+        jnp.stack([jnp.cos(yaw / 2), 0 * yaw, 0 * yaw, jnp.sin(yaw / 2)], -1)
+    )
+    near = jnp.arange(B) < 4
+    qpos = jnp.where(near[:, None], at_goal, qpos)
+    steps = env.episode_steps - 30
+    info = dict(state.info, step=jnp.full(B, steps, jnp.int32))
+    state = state.replace(pipeline_state=state.pipeline_state.replace(qpos=qpos), info=info)
+    zero = jnp.zeros((B, 12))
+    ended = None
+    for _ in range(30):
+        state = fns["step"](state, zero)
+        if np.any(np.asarray(state.done)):
+            ended = state
+            break
+    assert ended is not None
+    assert np.all(np.asarray(ended.done) == 1) and np.all(np.asarray(ended.info["truncation"]) == 1)
+    np.testing.assert_array_equal(np.asarray(ended.metrics["episode_success"]), [1] * 4 + [0] * 4)
+    # Level 0 -> 1 for robots at the goal, stays 0 (clamped down) for the others.
+    np.testing.assert_array_equal(np.asarray(ended.info["level"]), [1] * 4 + [0] * 4)
+
+
+# ----------------------------------------------------------------------------- reward terms
+
+
+def _quantities(**kw):
+    base = dict(
+        time=jnp.float32(8.0),
+        goal_distance=jnp.float32(3.0),
+        planar_goal_distance=jnp.float32(3.0),
+        yaw_error=jnp.float32(0.0),
+        centreline_distance=jnp.float32(0.0),
+        path_to_goal=jnp.float32(3.0),
+        lin_vel_body=jnp.zeros(3),
+        planar_speed=jnp.float32(0.0),
+        torque=jnp.zeros(12),
+        joint_pos=jnp.zeros(12),
+        joint_vel=jnp.zeros(12),
+        joint_acc=jnp.zeros(12),
+        action=jnp.zeros(12),
+        last_action=jnp.zeros(12),
+        joint_lower=-jnp.ones(12),
+        joint_upper=jnp.ones(12),
+        joint_vel_limit=jnp.float32(27.0),
+        trunk_contacts=jnp.zeros(4, bool),
+        knee_contacts=jnp.zeros(4, bool),
+        shin_contacts=jnp.zeros(4, bool),
+        first_contact=jnp.zeros(4, bool),
+        air_time=jnp.zeros(4),
+    )
+    base.update(kw)
+    return rw.Quantities(**base)
+
+
+def test_stall_penalty_fires_only_slow_and_away_from_goal():
+    c = rw.STAGE2
+    assert rw.stall(_quantities(planar_speed=jnp.float32(0.1)), c) == 1.0
+    assert rw.stall(_quantities(planar_speed=jnp.float32(0.29)), c) == 1.0
+    assert rw.stall(_quantities(planar_speed=jnp.float32(0.5)), c) == 0.0
+    inside = _quantities(planar_speed=jnp.float32(0.0), planar_goal_distance=jnp.float32(0.3))
+    assert rw.stall(inside, c) == 0.0
+    total, terms = rw.compute(_quantities(planar_speed=jnp.float32(0.1)), c, 0.02)
+    assert float(terms["stall"]) == pytest.approx(c.stall * 0.02)
+    _, terms_off = rw.compute(_quantities(), dataclasses.replace(c, stall=0.0), 0.02)
+    assert "stall" not in terms_off
+
+
+def test_centreline_reward_highest_on_the_line():
+    c = rw.STAGE2
+    line = jnp.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]] + [[4.0, 3.0]] * 5)
+    cum = jnp.concatenate(
+        [jnp.zeros(1), jnp.cumsum(jnp.linalg.norm(jnp.diff(line, axis=0), axis=-1))]
+    )
+    values = []
+    for offset in (0.0, 0.3, 0.8, 1.5):
+        dc, arc = rw.centreline_geometry(jnp.array([2.0, offset]), line, cum)
+        assert float(dc) == pytest.approx(offset, abs=1e-6) and float(arc) == pytest.approx(2.0)
+        q = _quantities(centreline_distance=dc, path_to_goal=dc + cum[-1] - arc)
+        values.append(float(rw.centreline(q, c)))
+    assert values == sorted(values, reverse=True) and values[0] > values[-1] + 0.3
+    # Further along the line toward the goal is better too.
+    near = _quantities(path_to_goal=jnp.float32(1.0))
+    far = _quantities(path_to_goal=jnp.float32(6.0))
+    assert rw.centreline(near, c) > rw.centreline(far, c)
+
+
+def test_navigation_terms_increase_as_goal_nears():
+    c = rw.STAGE1
+    ds = [6.0, 3.0, 1.0, 0.2]
+    coarse = [float(rw.nav_coarse(_quantities(goal_distance=jnp.float32(d)), c)) for d in ds]
+    fine = [float(rw.nav_fine(_quantities(goal_distance=jnp.float32(d)), c)) for d in ds]
+    assert coarse == sorted(coarse) and fine == sorted(fine)
+    assert rw.heading(_quantities(yaw_error=jnp.float32(1.0)), c) > rw.heading(_quantities(), c)
+    late = rw.STAGE2  # fine and heading count only after fine_after_s
+    assert (
+        rw.nav_fine(_quantities(goal_distance=jnp.float32(0.2), time=jnp.float32(1.0)), late) == 0.0
+    )
+
+
+# ----------------------------------------------------------------------------- curriculum
+
+
+def test_curriculum_rule_up_down_top_random_per_robot():
+    cfg = cur.CurriculumConfig()
+    n = 10
+    level = jnp.array([0, 4, 4, 0, 9, 9, 9, 9])
+    up = jnp.array([True, True, False, False, True, True, True, False])
+    keys = jax.random.split(jax.random.PRNGKey(0), 8)
+    new = jax.vmap(lambda lv, u, k: cur.next_level(lv, u, n, k, cfg))(level, up, keys)
+    new = np.asarray(new)
+    assert list(new[:4]) == [1, 5, 3, 0]  # up, up, down, down clamped at 0
+    assert new[7] == 8  # failed at the top: down
+    assert np.all((new[4:7] >= 0) & (new[4:7] < n))  # cleared the top: random levels
+    many = jax.vmap(lambda k: cur.next_level(jnp.int32(9), jnp.bool_(True), n, k, cfg))(
+        jax.random.split(jax.random.PRNGKey(1), 200)
+    )
+    assert len(set(np.asarray(many).tolist())) > 5
+    no_random = dataclasses.replace(cfg, random_on_top=False)
+    assert int(cur.next_level(jnp.int32(9), jnp.bool_(True), n, keys[0], no_random)) == 9
+    assert bool(cur.reached(jnp.float32(0.7), jnp.float32(0.3), cfg))
+    assert not bool(cur.reached(jnp.float32(0.9), jnp.float32(0.0), cfg))
+    assert not bool(cur.reached(jnp.float32(0.1), jnp.float32(0.5), cfg))
+
+
+def test_tile_table_keeps_family_columns():
+    family = np.array([0, 0, 1, 1, 1, 0, 0, 1, 1, 1])  # 2 rows x 5 columns
+    table = cur.TileTable(family, cols=5, num_families=2)
+    keys = jax.random.split(jax.random.PRNGKey(0), 64)
+    tiles = np.asarray(
+        jax.vmap(lambda k: cur.pick_tile(jnp.int32(1), jnp.int32(1), table, k))(keys)
+    )
+    assert set(tiles.tolist()) == {7, 8, 9}
+    with pytest.raises(ValueError, match="no column"):
+        cur.TileTable(np.zeros(4, int), cols=2, num_families=2)
+
+
+def test_packed_state_resumes_the_same_trajectory(env, fns):
+    state = _reset(env, fns, [1] * B, seed=5)
+    rng = jax.random.PRNGKey(2)
+    for _ in range(5):
+        rng, k = jax.random.split(rng)
+        state = fns["step"](state, jax.random.uniform(k, (B, 12), minval=-1, maxval=1))
+    packed = jax.jit(jax.vmap(env.pack_state))(state)
+    size = sum(np.asarray(x).nbytes for x in jax.tree_util.tree_leaves(packed)) / B
+    full = sum(np.asarray(x).nbytes for x in jax.tree_util.tree_leaves(state)) / B
+    assert size < full / 10
+    restored = jax.jit(jax.vmap(env.unpack_state))(packed)
+    np.testing.assert_allclose(
+        np.asarray(restored.obs["privileged_state"]), np.asarray(state.obs["privileged_state"]),
+        atol=1e-5,
+    )
+    a = jax.random.uniform(rng, (B, 12), minval=-1, maxval=1)
+    for _ in range(3):
+        state, restored = fns["step"](state, a), fns["step"](restored, a)
+    np.testing.assert_allclose(
+        np.asarray(restored.pipeline_state.qpos), np.asarray(state.pipeline_state.qpos), atol=1e-4
+    )
+    np.testing.assert_allclose(np.asarray(restored.reward), np.asarray(state.reward), atol=1e-4)
+
+
+@pytest.fixture(scope="session")
+def u_atlas():
+    return terrains.build_atlas(
+        ["u_shaped"], "train", levels=[0], variants_per_family=2, resolution=0.05, tile_size=10.0
+    )
+
+
+def _point_at_arc(line, s):
+    """Numpy reference: the polyline point at arc length s and the heading of its segment."""
+    seg = np.diff(line, axis=0)
+    length = np.linalg.norm(seg[:, :2], axis=1)
+    keep = length > 1e-9
+    seg, length, start = seg[keep], length[keep], line[:-1][keep]
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    i = min(np.searchsorted(cum, s, side="right") - 1, len(length) - 1)
+    t = (s - cum[i]) / length[i]
+    return start[i] + t * seg[i], np.arctan2(seg[i, 1], seg[i, 0]), cum[-1]
+
+
+def test_waypoint_goal_follows_the_centreline_then_becomes_the_goal(u_atlas):
+    env = StairEnv(u_atlas, EnvConfig(goal_mode="waypoint", waypoint_lookahead_m=1.0))
+    final = StairEnv(u_atlas, EnvConfig())
+    target = jax.jit(env.goal_target)
+    for tile in range(2):  # left- and right-turning
+        line = np.asarray(u_atlas.centreline[tile], np.float64)
+        goal = np.asarray(u_atlas.goal[tile])
+        total = _point_at_arc(line, 0.0)[2]
+        for s in (0.0, 0.7, 2.5, total / 2, total - 1.5):
+            p, yaw, _ = _point_at_arc(line, s)
+            want, want_yaw, _ = _point_at_arc(line, s + 1.0)
+            got = np.asarray(target(jnp.asarray([p[0], p[1], p[2] + 0.3], jnp.float32), tile))
+            np.testing.assert_allclose(got[:3], want, atol=2e-3, err_msg=f"tile {tile} s {s}")
+            assert abs(np.angle(np.exp(1j * (got[3] - want_yaw)))) < 1e-3
+            # 1 m ahead along the line is 1 m or less away in a straight line (corners cut).
+            assert np.linalg.norm(got[:2] - p[:2]) <= 1.0 + 2e-3
+        # Closer than the lookahead along the line: the final goal itself, yaw included.
+        p, _, _ = _point_at_arc(line, total - 0.6)
+        got = np.asarray(target(jnp.asarray([p[0], p[1], p[2] + 0.3], jnp.float32), tile))
+        np.testing.assert_allclose(got, goal, atol=1e-5)
+        # The paper's mode always points at the goal.
+        at_p = final.goal_target(jnp.asarray(p, jnp.float32), tile)
+        np.testing.assert_allclose(np.asarray(at_p), goal)
+
+
+def test_waypoint_goal_is_what_the_policy_sees(u_atlas):
+    env = StairEnv(u_atlas, EnvConfig(goal_mode="waypoint"))
+    state = jax.jit(env.reset_at)(jax.random.PRNGKey(0), jnp.int32(0), jnp.int32(1))
+    qpos = state.pipeline_state.qpos
+    obs = np.asarray(env._observe(qpos, jnp.zeros(18), state.info, None)["privileged_state"])
+    wp = np.asarray(env.goal_target(qpos[:3], state.info["tile"]))
+    from mjx_stairs.env.stair_env import quat_to_mat
+
+    rot = np.asarray(quat_to_mat(qpos[3:7]))
+    goal_obs = obs[45:49]
+    np.testing.assert_allclose(goal_obs[:3], rot.T @ (wp[:3] - np.asarray(qpos[:3])), atol=1e-5)
+    assert np.linalg.norm(goal_obs[:2]) < 1.2  # the waypoint, not the goal ~2 m across the wall
+
+
+def test_bad_goal_mode_is_a_one_line_error(u_atlas):
+    with pytest.raises(ValueError, match="env.goal_mode: unknown mode 'carrot'"):
+        StairEnv(u_atlas, EnvConfig(goal_mode="carrot"))
+    with pytest.raises(ValueError, match="env.waypoint_lookahead_m"):
+        StairEnv(u_atlas, EnvConfig(goal_mode="waypoint", waypoint_lookahead_m=0.0))

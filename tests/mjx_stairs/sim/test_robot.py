@@ -1,0 +1,121 @@
+"""The Go2 model: compiles in MuJoCo and MJX, matches the reference, stands, and touches terrain."""
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+from mujoco import mjx
+
+from mjx_stairs.sim import robot as rb
+
+# shared/reference/go2.md, typed in independently of the model.
+REFERENCE_RANGE = {
+    "hip": (-1.0472, 1.0472),
+    "front_thigh": (-1.5708, 3.4907),
+    "rear_thigh": (-0.5236, 4.5379),
+    "calf": (-2.7227, -0.83776),
+}
+REFERENCE_TORQUE = {"hip": 23.7, "thigh": 23.7, "calf": 45.43}
+
+RES = 0.05
+SIM_STEPS = 400  # 2 s at 5 ms
+
+
+def _hold_pose(model: mujoco.MjModel, qpos0: np.ndarray, steps: int):
+    """Run MJX with PD holding the nominal pose; returns qpos [steps, 19] and final MJX data."""
+    mx = mjx.put_model(model)
+    ids = rb.robot_ids(model)
+    limit = jnp.asarray(rb.TORQUE_LIMIT)
+    target = jnp.asarray(rb.NOMINAL_JOINT_POS)
+
+    def sub(d, _):
+        tau = rb.pd_torque(
+            target, d.qpos[ids.qpos_joints], d.qvel[ids.qvel_joints], 35.0, 1.0, limit
+        )
+        d = mjx.step(mx, d.replace(ctrl=tau))
+        return d, d.qpos
+
+    d0 = mjx.make_data(mx).replace(qpos=jnp.asarray(qpos0))
+    d, traj = jax.jit(lambda d: jax.lax.scan(sub, d, None, length=steps))(d0)
+    return np.asarray(traj), d
+
+
+@pytest.fixture(scope="module")
+def flat_model():
+    return rb.build_mj_model(np.zeros((161, 161), np.float32), RES)
+
+
+def test_compiles_in_mujoco_and_mjx(flat_model):
+    m = flat_model
+    assert m.nq == 19 and m.nv == 18 and m.nu == 12
+    mx = mjx.put_model(m)
+    d = jax.jit(mjx.step)(mx, mjx.make_data(mx).replace(qpos=jnp.asarray(rb.standing_qpos((4, 4)))))
+    assert np.all(np.isfinite(np.asarray(d.qpos)))
+    assert m.opt.timestep == pytest.approx(0.005)
+
+
+def test_total_mass(flat_model):
+    assert flat_model.body_subtreemass[flat_model.body("base").id] == pytest.approx(15.2, abs=0.3)
+
+
+def test_joint_ranges_and_torque_limits_match_reference(flat_model):
+    m = flat_model
+    for name in rb.JOINT_NAMES:
+        leg, part = name.split("_")[0], name.split("_")[1]
+        key = part if part != "thigh" else ("front_thigh" if leg[0] == "F" else "rear_thigh")
+        np.testing.assert_allclose(m.joint(name).range, REFERENCE_RANGE[key], atol=1e-6)
+        act = m.actuator(f"{leg}_{part}")
+        assert act.trnid[0] == m.joint(name).id
+        np.testing.assert_allclose(act.ctrlrange, [-REFERENCE_TORQUE[part], REFERENCE_TORQUE[part]])
+    np.testing.assert_allclose(
+        rb.TORQUE_LIMIT, [REFERENCE_TORQUE[p.split("_")[1]] for p in rb.JOINT_NAMES]
+    )
+
+
+def test_only_sphere_terrain_collisions(flat_model):
+    m = flat_model
+    terrain = m.geom("terrain").id
+    colliding = [g for g in range(m.ngeom) if m.geom_contype[g] or m.geom_conaffinity[g]]
+    for g in colliding:
+        if g == terrain:
+            continue
+        assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE
+        # robot geoms never collide with each other: contype & conaffinity is 0 among them
+        assert m.geom_conaffinity[g] == 0
+    names = {m.geom(g).name for g in colliding}
+    for group in ("foot", "knee", "shin", "trunk"):
+        assert set(rb.SPHERE_GROUPS[group]) <= names
+
+
+def test_stands_on_flat_heightfield(flat_model):
+    traj, _ = _hold_pose(flat_model, rb.standing_qpos((4.0, 4.0), 0.40), SIM_STEPS)
+    final = traj[-1]
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, final[3:7].astype(np.float64))
+    tilt = np.arccos(np.clip(rot[8], -1, 1))  # angle between body z and world z
+    assert tilt < 0.1
+    assert 0.25 <= final[2] <= 0.35
+    landed = traj[60]  # 0.3 s: the feet are down
+    assert np.linalg.norm(final[:2] - landed[:2]) < 0.05
+
+
+@pytest.mark.parametrize("terrain_contacts", ["mjx", "nearest"])
+def test_foot_pressed_into_step_is_pushed_out(terrain_contacts):
+    heights = np.zeros((161, 161), np.float32)
+    heights[:, 60:] = 0.10  # a 10 cm step for x >= 3 m
+    model = rb.build_mj_model(heights, RES, rb.RobotConfig(terrain_contacts=terrain_contacts))
+    data = mujoco.MjData(model)
+    data.qpos[:] = rb.standing_qpos((5.0, 4.0), 0.0)
+    mujoco.mj_kinematics(model, data)
+    feet = [model.geom(n).id for n in rb.SPHERE_GROUPS["foot"]]
+    lowest = min(data.geom_xpos[g][2] for g in feet) - 0.022
+    # Feet 1.5 cm inside the step's top surface.
+    data.qpos[2] = 0.10 - 0.015 - lowest
+    traj, d = _hold_pose(model, data.qpos.copy(), 40)
+    mujoco.mj_kinematics(model, data)
+    data.qpos[:] = traj[-1]
+    mujoco.mj_kinematics(model, data)
+    bottoms = [data.geom_xpos[g][2] - 0.022 for g in feet]
+    assert min(bottoms) > 0.10 - 0.006, bottoms  # pushed back out of the step
+    assert np.any(np.asarray(d._impl.contact.dist) < 1e-3)  # through heightfield contacts

@@ -1,0 +1,222 @@
+"""ONNX export: the graph matches the JAX policy (onnxruntime), the sidecar matches the env."""
+
+from __future__ import annotations
+
+import copy
+import json
+import types
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+onnx = pytest.importorskip("onnx")
+ort = pytest.importorskip("onnxruntime")
+
+from mjx_stairs import cli  # noqa: E402
+from mjx_stairs.rl import networks, normalizer  # noqa: E402
+from mjx_stairs.rl import policy as policy_lib  # noqa: E402
+from mjx_stairs.sim import robot as rb  # noqa: E402
+from mjx_stairs.study.experiment import ExperimentConfig  # noqa: E402
+from mjx_stairs.tools import export  # noqa: E402
+
+N_VEC, MAP = 49, (21, 21)
+D = N_VEC + MAP[0] * MAP[1]
+
+
+def _policy_state(seed: int = 0):
+    """Params of the real architecture with non-trivial biases and an actor output of order 1,
+    and a normaliser with varied means and stds (some tiny, so the clip is active)."""
+    cfg = ExperimentConfig()
+    k = jax.random.split(jax.random.PRNGKey(seed), 8)
+    params = networks.init_params(k[0], cfg.network, N_VEC, MAP, 12)
+    params["actor"][-1]["w"] = params["actor"][-1]["w"] * 20.0  # actions of order 1, as trained
+    paths, treedef = jax.tree_util.tree_flatten_with_path(params)
+    keys = jax.random.split(k[1], len(paths))
+    leaves = [x + 0.1 * jax.random.normal(kk, x.shape) if jax.tree_util.keystr(path).endswith(
+        "['b']") else x for (path, x), kk in zip(paths, keys, strict=True)]  # non-zero biases
+    params = jax.tree_util.tree_unflatten(treedef, leaves)
+    stats = normalizer.RunningStats(
+        count=jnp.asarray(1000.0, jnp.float32),
+        mean=jax.random.normal(k[2], (D,)),
+        m2=1000.0 * jnp.exp(2.0 * jax.random.uniform(k[3], (D,), minval=-1.5, maxval=1.0)),
+    )
+    norm = {"state": stats, "privileged_state": normalizer.init_stats(D)}
+    return types.SimpleNamespace(params=params, normalizer=norm,
+                                 iteration=jnp.asarray(7, jnp.int32)), cfg
+
+
+@pytest.fixture(scope="module")
+def policy_file(tmp_path_factory):
+    state, cfg = _policy_state()
+    path = tmp_path_factory.mktemp("export") / "policy.npz"
+    policy_lib.save_policy(path, state.params, state.normalizer, 7, cfg,
+                           networks.ObsLayout(N_VEC, MAP))
+    return path
+
+
+@pytest.fixture(scope="module")
+def policy(policy_file):
+    return policy_lib.load_policy(policy_file)
+
+
+@pytest.fixture(scope="module")
+def exported(policy, tmp_path_factory):
+    path = tmp_path_factory.mktemp("onnx") / "policy.onnx"
+    side = export.export_policy(policy, path)
+    return path, side
+
+
+@pytest.fixture(scope="module")
+def jax_action(policy):
+    return jax.jit(lambda o: policy_lib.policy_action(policy, o))
+
+
+def _obs(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    obs = rng.standard_normal((n, D)).astype(np.float32) * 2.0
+    obs[:, N_VEC:] = rng.uniform(-3.0, 3.0, (n, D - N_VEC))  # height map range
+    obs[: n // 2, :5] *= 100.0  # far outside the normaliser's clip
+    return obs
+
+
+def test_onnx_matches_jax_on_random_observations(policy, exported, jax_action):
+    path, _ = exported
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    for n, seed in ((1, 0), (5, 1), (64, 2)):
+        obs = _obs(n, seed)
+        got = sess.run(["action"], {"obs": obs})[0]
+        want = np.asarray(jax_action(obs))
+        assert got.shape == (n, 12) and got.dtype == np.float32
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+    # the comparison has teeth: actions of order 1, vary with the obs, and the clip matters
+    obs = _obs(64, 3)
+    want = np.asarray(jax_action(obs))
+    assert np.std(want) > 0.1
+    mean, denom, clip = policy_lib.normaliser_constants(policy)
+    assert np.mean(np.abs((obs - mean) / denom) > clip) > 0.01
+    no_clip = networks.actor_mean(policy.params, jnp.asarray((obs - mean) / denom), policy.layout)
+    assert np.max(np.abs(np.asarray(no_clip) - want)) > 1e-2
+    # and the map half of the input reaches the output
+    moved = obs.copy()
+    moved[:, N_VEC:] += 0.5
+    assert np.max(np.abs(sess.run(["action"], {"obs": moved})[0] - want)) > 1e-3
+
+
+def test_verify_reports_the_difference(policy, exported):
+    assert export.verify(policy, exported[0], n=16) <= 1e-5
+
+
+def test_graph_structure(exported):
+    model = onnx.load(str(exported[0]))
+    onnx.checker.check_model(model)
+    assert model.opset_import[0].version == export.OPSET
+    (inp,), (out,) = model.graph.input, model.graph.output
+    assert inp.name == "obs" and out.name == "action"
+    dims = lambda v: [d.dim_param or d.dim_value for d in v.type.tensor_type.shape.dim]
+    assert dims(inp) == ["batch", D] and dims(out) == ["batch", 12]
+    ops = {n.op_type for n in model.graph.node}
+    assert {"Sub", "Div", "Clip", "Slice", "Reshape", "Conv", "MaxPool", "Elu", "Gemm",
+            "Concat"} <= ops
+    assert sum(n.op_type == "Conv" for n in model.graph.node) == 3
+
+
+def test_sidecar_layout_matches_the_env(exported):
+    """Every named range of the sidecar holds what the env's observation puts there."""
+    import terrains
+    from mjx_stairs.env.stair_env import EnvConfig, StairEnv, quat_to_mat, wrap_angle
+
+    _, side = exported
+    layout = side["observation"]["layout"]
+    assert layout[0]["start"] == 0 and layout[-1]["stop"] == D
+    assert all(a["stop"] == b["start"] for a, b in zip(layout, layout[1:], strict=False))
+    atlas = terrains.build_atlas(["pyramid"], "train", levels=[4], variants_per_family=1,
+                                 resolution=0.1, tile_size=10.0, border=1.0)
+    env = StairEnv(atlas, EnvConfig())
+    rng = np.random.default_rng(0)
+    sp = atlas.spawn[0]
+    q = rng.normal(size=4)
+    qpos = np.concatenate([[sp[0] + 0.3, sp[1] - 0.2, sp[2] + 0.35], q / np.linalg.norm(q),
+                           rb.NOMINAL_JOINT_POS + rng.uniform(-0.3, 0.3, 12)]).astype(np.float32)
+    qvel = rng.normal(size=18).astype(np.float32)
+    last = rng.uniform(-1, 1, 12).astype(np.float32)
+    info = {"tile": jnp.int32(0), "last_action": jnp.asarray(last)}
+    obs = np.asarray(env._observe(jnp.asarray(qpos), jnp.asarray(qvel), info, None)["state"])
+    part = {e["name"]: obs[e["start"]:e["stop"]] for e in layout}
+    rot = np.asarray(quat_to_mat(jnp.asarray(qpos[3:7])))
+    yaw = np.arctan2(rot[1, 0], rot[0, 0])
+    goal = np.asarray(atlas.goal[0])
+    tol = dict(rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(part["base_lin_vel"], rot.T @ qvel[:3], **tol)
+    np.testing.assert_allclose(part["base_ang_vel"], qvel[3:6], **tol)
+    np.testing.assert_allclose(part["projected_gravity"], rot.T @ [0, 0, -1.0], **tol)
+    np.testing.assert_allclose(part["joint_pos"], qpos[7:] - rb.NOMINAL_JOINT_POS, **tol)
+    np.testing.assert_allclose(part["joint_vel"], qvel[6:], **tol)
+    np.testing.assert_allclose(part["last_action"], last, **tol)
+    np.testing.assert_allclose(part["goal"][:3], rot.T @ (goal[:3] - qpos[:3]), **tol)
+    np.testing.assert_allclose(part["goal"][3], float(wrap_angle(goal[3] - yaw)), **tol)
+    # height map: row i = y, column j = x of the yaw frame, at -2 + 0.2 * index
+    hm = side["height_map"]
+    n, s = hm["size"][0], hm["spacing_m"]
+    grid = part["height_map"].reshape(n, n)
+    for i, j in ((0, 0), (3, 17), (20, 5), (10, 10)):
+        x, y = -2.0 + s * j, -2.0 + s * i
+        wx = qpos[0] + np.cos(yaw) * x - np.sin(yaw) * y
+        wy = qpos[1] + np.sin(yaw) * x + np.cos(yaw) * y
+        h = float(env.terrain_height(jnp.float32(wx), jnp.float32(wy)))
+        want = np.clip(qpos[2] - h - hm["offset_m"], -hm["clip_m"], hm["clip_m"])
+        assert grid[i, j] == pytest.approx(want, abs=1e-4)
+
+
+def test_sidecar_robot_facts(exported, policy):
+    _, side = exported
+    assert side["joints"]["names"] == list(rb.JOINT_NAMES)
+    np.testing.assert_allclose(side["joints"]["nominal_pos_rad"], rb.NOMINAL_JOINT_POS)
+    cfg = ExperimentConfig().env
+    assert side["rates"]["control_hz"] == pytest.approx(50.0)
+    assert side["rates"]["physics_dt_s"] == cfg.robot.timestep
+    assert side["pd"]["kp"] == cfg.robot.kp and side["pd"]["kd"] == cfg.robot.kd
+    np.testing.assert_allclose(side["pd"]["torque_limit_nm"], rb.TORQUE_LIMIT)
+    assert side["action"]["scale"] == cfg.robot.action_scale
+    assert side["action"]["clip"] == cfg.action_clip
+    assert side["height_map"]["size"] == [21, 21] and side["height_map"]["spacing_m"] == 0.2
+    assert side["height_map"]["offset_m"] == 0.4 and side["height_map"]["clip_m"] == 3.0
+    assert side["policy"]["iteration"] == 7
+    assert side["normalizer"]["clip"] == policy.network.obs_clip
+
+
+def test_cli_export_writes_both_files(policy_file, tmp_path, capsys):
+    out = tmp_path / "sub" / "p.onnx"
+    assert cli.main(["export", "--checkpoint", str(policy_file), "--onnx", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "max |diff|" in text
+    side = json.loads((tmp_path / "sub" / "p.onnx.json").read_text())
+    import hashlib
+
+    assert side["onnx"]["sha256"] == hashlib.sha256(out.read_bytes()).hexdigest()
+    assert sorted(p.name for p in out.parent.iterdir()) == ["p.onnx", "p.onnx.json"]
+
+
+@pytest.mark.parametrize("damage", ["missing", "corrupt"])
+def test_cli_export_bad_checkpoint(tmp_path, capsys, damage):
+    ck = tmp_path / "policy.npz"
+    if damage == "corrupt":
+        ck.write_bytes(b"PK\x03\x04 not really a zip")
+    code = cli.main(["export", "--checkpoint", str(ck), "--onnx", str(tmp_path / "p.onnx")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("mjx-stairs export: error:")
+    assert ("not found" if damage == "missing" else "corrupt") in err[0]
+    assert not (tmp_path / "p.onnx").exists()
+
+
+def test_sidecar_says_what_the_goal_input_is(policy, exported):
+    _, side = exported
+    (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
+    assert "waypoint" not in goal["description"]  # the default, final-goal policy
+    meta = copy.deepcopy(policy.metadata)
+    meta["config"]["env"].update(goal_mode="waypoint", waypoint_lookahead_m=1.5)
+    side = export.sidecar(policy._replace(metadata=meta))
+    (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
+    assert "waypoint" in goal["description"] and "1.5 m" in goal["description"]
