@@ -22,7 +22,7 @@ def _csv_ints(text: str) -> tuple[int, ...]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from mjx_stairs.rl import runner as train
+    from mjx_stairs.rl import runner
     from mjx_stairs.study import experiment
 
     config, cpu = experiment.load(args.config, args.overrides)
@@ -34,7 +34,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             flush=True,
         )
     env = experiment.make_env(config)
-    result = train.run(config, env, run_dir=args.run_dir, resume=args.resume)
+    result = runner.run(config, env, run_dir=args.run_dir, resume=args.resume)
     if config.publish_dir:
         experiment.publish(result.run_dir, config.publish_dir, result.metrics, result.stop_reason)
         print(f"[mjx-stairs] published to {config.publish_dir}", flush=True)

@@ -29,7 +29,7 @@ import time
 import jax
 
 from mjx_stairs import atomic
-from mjx_stairs.rl import runner as train
+from mjx_stairs.rl import trainer as train
 from mjx_stairs.study import experiment
 
 
@@ -113,7 +113,7 @@ def main() -> None:
             by_scope[scope + "/encoder"] += dur
         by_path[_scope_path(op_name, 4)] += dur
         deep = _scope_path(op_name, 8)
-        if scope == "rollout":  # the env step's named pieces (mjx_stairs/env.py)
+        if scope == "rollout":  # the env step's named pieces (mjx_stairs/env/stair_env.py)
             piece = next((p for p in ENV_PIECES  # under vmap a scope reads "vmap(name)"
                           if f"/{p}/" in f"/{op_name}/" or f"({p})" in op_name), "rest")
             by_piece[piece] += dur

@@ -3,7 +3,7 @@
     python3 experiments/gpu/update_profile.py --config experiments/stage2_u_lean.toml \
         --out /tmp/out/update_profile.json [overrides...]
 
-With the trainer's own functions and the config's sizes: the rollout (``train.rollout``), the
+With the trainer's own functions and the config's sizes: the rollout (``rollout.rollout``), the
 glue between rollout and update (GAE, the [T, B] -> [B, T] swap, the normaliser update), one
 epoch's shuffle (permutation + gather of the whole batch), one minibatch step (loss, grads, Adam),
 the whole PPO update (num_epochs x num_minibatches) and one whole training iteration. Median
@@ -23,8 +23,8 @@ import jax
 from encoder_bench import time_ms  # this folder, on sys.path when run as a script
 
 from mjx_stairs import atomic
-from mjx_stairs.rl import ppo
-from mjx_stairs.rl import runner as train
+from mjx_stairs.rl import ppo, rollout
+from mjx_stairs.rl import trainer as train
 from mjx_stairs.study import experiment
 
 
@@ -50,7 +50,7 @@ def main() -> None:
                  "ms": {}}
     ms = out["ms"]
 
-    roll = jax.jit(lambda s, k: train.rollout(s, k, **kw))
+    roll = jax.jit(lambda s, k: rollout.rollout(s, k, **kw))
     ms["rollout"] = time_ms(roll, (state, jax.random.PRNGKey(1)), args.repeats)
     _, tr, _, _, bootstrap = roll(state, jax.random.PRNGKey(1))
 

@@ -127,3 +127,47 @@ def console_block(record: dict[str, Any], total_iterations: int) -> str:
         else:
             lines.append(f"{k:>36s}: {v}")
     return "\n".join(lines)
+
+
+class RunLogger:
+    """What a run shows and keeps per chunk: metrics.jsonl + TensorBoard (MetricsLogger), a tqdm
+    bar of env steps and an rsl_rl-style console block."""
+
+    def __init__(self, run_dir: str | Path, *, steps_per_iteration: int, iteration: int,
+                 target_iteration: int, tensorboard: bool, progress: bool, console: bool):
+        self.metrics = MetricsLogger(run_dir, tensorboard=tensorboard)
+        self.steps_per_iteration = steps_per_iteration
+        self.iteration = iteration
+        self.target_iteration = target_iteration
+        self.console = console
+        self.bar = None
+        if progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=target_iteration * steps_per_iteration,
+                            initial=iteration * steps_per_iteration, unit="step",
+                            unit_scale=True, dynamic_ncols=True)
+
+    def log(self, record: dict[str, Any]) -> None:
+        """One chunk's record (with "iteration" and "env_steps")."""
+        self.metrics.log(record, step=record["env_steps"])
+        done = record["iteration"] - self.iteration
+        self.iteration = record["iteration"]
+        if self.bar is not None:
+            self.bar.update(done * self.steps_per_iteration)
+            post = {"ret": f"{record['episode/return']:.3g}"}
+            for k in ("level", "success"):
+                if k in record:
+                    post[k] = f"{record[k]:.3g}"
+            self.bar.set_postfix(post, refresh=False)
+        if self.console:
+            text = console_block(record, self.target_iteration)
+            if self.bar is not None:
+                self.bar.write(text)
+            else:
+                print(text, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        self.metrics.close()

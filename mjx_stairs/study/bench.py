@@ -21,7 +21,8 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
-from mjx_stairs.rl.runner import build_trainer, rollout
+from mjx_stairs.rl.rollout import rollout
+from mjx_stairs.rl.trainer import build_trainer
 from mjx_stairs.sim import robot as rb
 from mjx_stairs.study.experiment import ExperimentConfig, make_env
 
@@ -176,7 +177,6 @@ def run_bench(
             "terrain_contacts": config.env.robot.terrain_contacts,
         },
         "network": {"conv_impl": config.network.conv_impl},
-        "rollout_values": config.train.rollout_values,
         "contacts": int(sum(r.size for r in env._contact_rows.values() if r is not None)),
         "results": [],
     }

@@ -149,7 +149,7 @@ def run_pipeline(
     """
     import jax
 
-    from mjx_stairs.rl import runner as train
+    from mjx_stairs.rl import runner
     from mjx_stairs.study import experiment
 
     cpu = jax.default_backend() == "cpu"
@@ -165,7 +165,7 @@ def run_pipeline(
             print(f"[exp1] {name}: using {published[name]}", flush=True)
             continue
         print(f"[exp1] {name}: training{' (CPU preset)' if cpu else ''}", flush=True)
-        result = train.run(config, experiment.make_env(config))
+        result = runner.run(config, experiment.make_env(config))
         experiment.publish(result.run_dir, dest, result.metrics, result.stop_reason)
     out = published["stage2_u"].parent.parent / "exp1"
     n = robots or (8 if cpu else 1000)

@@ -19,7 +19,7 @@ from mjx_stairs.env.rewards import PRESETS
 from mjx_stairs.env.stair_env import EnvConfig, StairEnv
 from mjx_stairs.rl.networks import NetworkConfig
 from mjx_stairs.rl.ppo import PPOConfig
-from mjx_stairs.rl.runner import TrainConfig
+from mjx_stairs.rl.trainer import TrainConfig
 
 
 @dataclass(frozen=True)

@@ -125,7 +125,7 @@ def run_pipeline(spec: evaluate.EvalSpec, force: bool = False) -> dict[str, Any]
     matrix. On the CPU the experiments run their [cpu] presets under results/cpu_preset/."""
     import jax
 
-    from mjx_stairs.rl import runner as train
+    from mjx_stairs.rl import runner
     from mjx_stairs.study import experiment
 
     cpu = jax.default_backend() == "cpu"
@@ -135,7 +135,7 @@ def run_pipeline(spec: evaluate.EvalSpec, force: bool = False) -> dict[str, Any]
         dest = Path(config.publish_dir)
         if not (dest / "policy.npz").exists() or force:
             print(f"[transfer] {name}: training{' (CPU preset)' if cpu else ''}", flush=True)
-            result = train.run(config, experiment.make_env(config))
+            result = runner.run(config, experiment.make_env(config))
             experiment.publish(result.run_dir, dest, result.metrics, result.stop_reason)
         if name != "stage1":
             family = config.terrain.families[0]

@@ -17,15 +17,16 @@ import jax
 import numpy as np
 import pytest
 
-from mjx_stairs.rl import checkpoint
+from mjx_stairs.rl import checkpoint, checkpointer, ppo, runner
 from mjx_stairs.rl import policy as policy_lib
-from mjx_stairs.rl import runner as train
-from mjx_stairs.rl.networks import NetworkConfig
+from mjx_stairs.rl import rollout as rollout_lib
+from mjx_stairs.rl import trainer as train_lib
+from mjx_stairs.rl.networks import NetworkConfig, ObsLayout
 from mjx_stairs.rl.ppo import PPOConfig
-from mjx_stairs.rl.runner import LearnerConfig, TrainConfig
+from mjx_stairs.rl.trainer import LearnerConfig, TrainConfig
 from tests.mjx_stairs.rl.toy_env import PointReach
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 SMALL_NET = NetworkConfig(conv_channels=(4, 4, 8), latent_size=16, actor_hidden=(32, 32),
                           critic_hidden=(32, 32))
@@ -50,7 +51,7 @@ THRESHOLD = 28.0  # a policy that reaches and holds the goal scores ~32
 
 @pytest.fixture(scope="module")
 def learner():
-    return train.make_train(LEARN_CFG, TOY)
+    return train_lib.make_train(LEARN_CFG, TOY)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -72,46 +73,43 @@ def test_ppo_learns_the_toy_task(learner, seed):
 
 
 def test_layout_from_env():
-    assert train.obs_layout(PointReach()) == train.ObsLayout(5, ())
-    assert train.obs_layout(PointReach(map_shape=(5, 5))) == train.ObsLayout(5, (5, 5))
+    assert rollout_lib.obs_layout(PointReach()) == ObsLayout(5, ())
+    assert rollout_lib.obs_layout(PointReach(map_shape=(5, 5))) == ObsLayout(5, (5, 5))
 
 
 def test_bad_sizes_are_clear_errors():
     cfg = replace(LEARN_CFG, ppo=PPOConfig(num_minibatches=7))
     with pytest.raises(ValueError, match="does not split into ppo.num_minibatches=7"):
-        train.make_train(cfg, PointReach())
+        train_lib.make_train(cfg, PointReach())
 
 
-def test_batched_rollout_values_equal_per_step_values():
-    """The critic's values computed after the rollout scan (one batched pass) are the values
-    the per-step path computes beside each action, final-obs values of timeouts included."""
+def test_rollout_values_are_the_critics_values():
+    """The critic's values computed after the rollout scan (one batched pass) are V(obs_t),
+    V(final obs_t) (the pre-reset obs where an episode ended) and V(obs_T)."""
     env = PointReach(map_shape=(5, 5), episode_length=5)  # timeouts inside an 8-step rollout
     cfg = LearnerConfig(network=SMALL_NET,
                         train=TrainConfig(num_envs=16, unroll_length=8, iterations_per_chunk=1))
-    trainer = train.build_trainer(cfg, env)
+    trainer = train_lib.build_trainer(cfg, env)
     state = trainer.init(jax.random.PRNGKey(5))
-    key = jax.random.PRNGKey(6)
-    out = {}
-    for mode in ("per_step", "batched"):
-        c = replace(cfg, train=replace(cfg.train, rollout_values=mode))
-        fn = jax.jit(lambda s, k, c=c: train.rollout(s, k, config=c, env=env,
-                                                       layout=trainer.layout, mesh=trainer.mesh))
-        out[mode] = fn(state, key)
-    (_, a, _, _, boot_a), (_, b, _, _, boot_b) = out["per_step"], out["batched"]
-    assert b.final_critic_obs is None and a.final_critic_obs is None
-    assert float(np.sum(a.truncation)) >= 16  # every robot timed out once
-    np.testing.assert_array_equal(np.asarray(a.action), np.asarray(b.action))
-    for x, y in ((a.value, b.value), (a.final_value, b.final_value), (boot_a, boot_b)):
-        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-5)
-    # the final-obs values are not the next step's values where an episode ended
-    ended = np.asarray(a.done[:-1]) > 0
-    gap = np.asarray(a.final_value[:-1])[ended] - np.asarray(a.value[1:])[ended]
-    assert np.abs(gap).max() > 1e-3
-    with pytest.raises(ValueError, match="train.rollout_values must be"):
-        train.make_train(replace(cfg, train=replace(cfg.train, rollout_values="x")), env)
+    fn = jax.jit(lambda s, k: rollout_lib.rollout(s, k, config=cfg, env=env,
+                                                  layout=trainer.layout, mesh=trainer.mesh))
+    (env_state, _, _), tr, metrics, ep_stats, boot = fn(state, jax.random.PRNGKey(6))
+    assert tr.final_critic_obs is None
+    assert float(np.sum(tr.truncation)) >= 16  # every robot timed out once
+    critic = jax.jit(lambda o: ppo.critic_value(state.params, state.normalizer, o, cfg.network,
+                                                trainer.layout))
+    np.testing.assert_allclose(np.asarray(tr.value), np.asarray(critic(tr.critic_obs)),
+                               rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(boot),
+                               np.asarray(critic(env_state.obs["privileged_state"])),
+                               rtol=1e-5, atol=1e-5)
+    # the final-obs values are the next step's values, except where an episode ended
+    ended = np.asarray(tr.done[:-1]) > 0
+    gap = np.asarray(tr.final_value[:-1]) - np.asarray(tr.value[1:])
+    assert np.abs(gap[ended]).max() > 1e-3
+    np.testing.assert_allclose(gap[~ended], 0.0, atol=1e-5)
     # the per-step metrics (one stacked reduction) are the robots' means, the episode stats sums
-    _, _, metrics, ep_stats, _ = out["batched"]
-    reward, done = np.asarray(b.reward), np.asarray(b.done)
+    reward, done = np.asarray(tr.reward), np.asarray(tr.done)
     np.testing.assert_allclose(np.asarray(metrics["reward/total"]), reward.mean(axis=1),
                                rtol=1e-6)
     np.testing.assert_array_equal(np.asarray(ep_stats["count"]), done.sum(axis=1))
@@ -130,12 +128,12 @@ MAP_CFG = LearnerConfig(
 
 def test_chunk_save_load_chunk_is_bit_exact(tmp_path):
     env = PointReach(map_shape=(5, 5))
-    trainer = train.build_trainer(MAP_CFG, env)
+    trainer = train_lib.build_trainer(MAP_CFG, env)
     s1, _ = trainer.chunk(trainer.init(jax.random.PRNGKey(3)))
     path = tmp_path / "state.npz"
-    train.save_state(path, s1, MAP_CFG, trainer.layout)
+    checkpointer.save_state(path, s1, MAP_CFG, trainer.layout)
     s2, m2 = trainer.chunk(s1)  # s1 is donated here
-    restored, meta = train.load_state(path, trainer)
+    restored, meta = checkpointer.load_state(path, trainer)
     assert meta["iteration"] == 2 and meta["layout"]["map_shape"] == [5, 5]
     assert meta["config"]["train"]["num_envs"] == 16
     s2b, m2b = trainer.chunk(restored)
@@ -154,12 +152,12 @@ def _run_cfg(tmp_path, **kw):
 
 def test_run_then_resume_equals_one_run(tmp_path):
     env = TOY
-    full = train.run(_run_cfg(tmp_path / "a"), env)
+    full = runner.run(_run_cfg(tmp_path / "a"), env)
     assert full.stop_reason == "total_iterations" and int(full.state.iteration) == 20
 
-    half = train.run(_run_cfg(tmp_path / "b", total_iterations=10), env)
+    half = runner.run(_run_cfg(tmp_path / "b", total_iterations=10), env)
     assert int(half.state.iteration) == 10
-    resumed = train.run(_run_cfg(tmp_path / "b"), env, run_dir=half.run_dir, resume=True)
+    resumed = runner.run(_run_cfg(tmp_path / "b"), env, run_dir=half.run_dir, resume=True)
     assert resumed.run_dir == half.run_dir and int(resumed.state.iteration) == 20
     assert _leaves_equal(full.state, resumed.state)
 
@@ -180,7 +178,7 @@ def test_run_then_resume_equals_one_run(tmp_path):
     assert policy_file.stat().st_size < 16 * 2**20
     policy = policy_lib.load_policy(policy_file)
     assert _leaves_equal(policy.params, resumed.state.params)
-    assert policy.layout == train.ObsLayout(5, ()) and policy.action_size == 2
+    assert policy.layout == ObsLayout(5, ()) and policy.action_size == 2
     obs = np.zeros((3, 5), np.float32)
     assert policy_lib.policy_action(policy, obs).shape == (3, 2)
     assert policy_lib.policy_value(policy, obs).shape == (3,)
@@ -189,43 +187,43 @@ def test_run_then_resume_equals_one_run(tmp_path):
     ck = half.run_dir / "checkpoints" / "state_00000010.npz"
     moved = tmp_path / "carried.npz"
     moved.write_bytes(ck.read_bytes())
-    other = train.run(_run_cfg(tmp_path / "d"), env, run_dir=tmp_path / "d" / "r", resume=moved)
+    other = runner.run(_run_cfg(tmp_path / "d"), env, run_dir=tmp_path / "d" / "r", resume=moved)
     assert _leaves_equal(full.state, other.state)
     assert (tmp_path / "d" / "r" / "checkpoints" / "state_00000020.npz").exists()
 
     # resuming a finished run does nothing more; --resume without a run fails clearly
-    again = train.run(_run_cfg(tmp_path / "b"), env, resume=True)
+    again = runner.run(_run_cfg(tmp_path / "b"), env, resume=True)
     assert again.run_dir == run_dir and int(again.state.iteration) == 20
     with pytest.raises(FileNotFoundError, match="no run 'toy__7__"):
-        train.run(_run_cfg(tmp_path / "c"), env, resume=True)
+        runner.run(_run_cfg(tmp_path / "c"), env, resume=True)
 
 
 def test_packed_env_checkpoints_resume(tmp_path):
     env = TOY
-    full = train.run(_run_cfg(tmp_path / "a", checkpoint_env="packed"), env)
-    half = train.run(_run_cfg(tmp_path / "b", total_iterations=10, checkpoint_env="packed"), env)
+    full = runner.run(_run_cfg(tmp_path / "a", checkpoint_env="packed"), env)
+    half = runner.run(_run_cfg(tmp_path / "b", total_iterations=10, checkpoint_env="packed"), env)
     ck = checkpoint.latest_checkpoint(half.run_dir / "checkpoints")
     assert checkpoint.load_metadata(ck)["env_format"] == "packed"
     assert not any("final_obs" in k for k in checkpoint.load(ck)[0])
-    resumed = train.run(_run_cfg(tmp_path / "b", checkpoint_env="packed"), env,
+    resumed = runner.run(_run_cfg(tmp_path / "b", checkpoint_env="packed"), env,
                         run_dir=half.run_dir, resume=True)
     # the toy env recomputes the clean obs exactly, so here the resume is still bit-exact
     assert _leaves_equal(full.state.params, resumed.state.params)
     with pytest.raises(ValueError, match="needs env.pack_state"):
-        train.save_state(tmp_path / "x.npz", resumed.state,
-                         _run_cfg(tmp_path, checkpoint_env="packed"), train.ObsLayout(5), env=None)
+        checkpointer.save_state(tmp_path / "x.npz", resumed.state,
+                         _run_cfg(tmp_path, checkpoint_env="packed"), ObsLayout(5), env=None)
 
 
 def test_stops_on_env_steps_and_time_budget(tmp_path):
     env = TOY
-    r = train.run(_run_cfg(tmp_path, total_iterations=100, max_env_steps=30000), env)
+    r = runner.run(_run_cfg(tmp_path, total_iterations=100, max_env_steps=30000), env)
     # whole chunks of 20480 steps: stops once 30000 are reached
     assert r.stop_reason == "max_env_steps" and int(r.state.iteration) == 20
     assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000020.npz"
-    r = train.run(_run_cfg(tmp_path, total_iterations=100, time_budget_s=0.5), env)
+    r = runner.run(_run_cfg(tmp_path, total_iterations=100, time_budget_s=0.5), env)
     assert r.stop_reason == "time_budget" and int(r.state.iteration) == 0
     stops = []
-    r = train.run(_run_cfg(tmp_path, total_iterations=100),
+    r = runner.run(_run_cfg(tmp_path, total_iterations=100),
                   env, on_chunk=lambda rec: stops.append(rec["iteration"]) or len(stops) == 3)
     assert r.stop_reason == "on_chunk" and stops == [10, 20, 30]
     assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000030.npz"
@@ -240,14 +238,15 @@ DEVICES_SCRIPT = textwrap.dedent("""
     os.environ["JAX_PLATFORMS"] = "cpu"
     sys.path.insert(0, {root!r})
     import jax, numpy as np
-    from mjx_stairs.rl import runner as train
+    from mjx_stairs.rl import sharding
+    from mjx_stairs.rl import trainer as train_lib
     from tests.mjx_stairs.rl.test_train import MAP_CFG
     from tests.mjx_stairs.rl.toy_env import PointReach
     assert len(jax.devices()) == 2, jax.devices()
     env = PointReach(map_shape=(5, 5))
     out = {{}}
     for n in (2, 1):
-        t = train.build_trainer(MAP_CFG, env, mesh=train.make_mesh(jax.devices()[:n]))
+        t = train_lib.build_trainer(MAP_CFG, env, mesh=sharding.make_mesh(jax.devices()[:n]))
         s = t.init(jax.random.PRNGKey(0))
         shard_devs = {{len(x.sharding.device_set) for x in jax.tree_util.tree_leaves(s.env_state)}}
         assert shard_devs == {{n}}, shard_devs
