@@ -55,13 +55,13 @@ def cmd_exp1_report(args: argparse.Namespace) -> int:
 
 
 def cmd_curves(args: argparse.Namespace) -> int:
-    from mjx_stairs.study import exp1
+    from mjx_stairs.study import plots
 
     runs = {}
     for item in args.run:
         name, sep, path = item.partition("=")
         runs[name if sep else Path(item).name] = path if sep else item
-    exp1.plot_curves(runs, args.out)  # a missing or broken file: main's one-line error
+    plots.plot_curves(runs, args.out)  # a missing or broken file: main's one-line error
     print(f"wrote {args.out}")
     return 0
 
@@ -110,13 +110,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_critic_map(args: argparse.Namespace) -> int:
     from mjx_stairs.rl.policy import load_policy
-    from mjx_stairs.study import evaluate
+    from mjx_stairs.study import critic_map, plots
 
     policy = load_policy(args.checkpoint)
-    m = evaluate.critic_map(
+    m = critic_map.critic_map(
         policy, args.family, args.level - 1, args.variant, resolution=args.resolution
     )
-    evaluate.plot_critic_map(m, args.out, f"critic value, {args.family} test level {args.level}")
+    plots.plot_critic_map(m, args.out, f"critic value, {args.family} test level {args.level}")
     print(f"wrote {args.out}")
     return 0
 

@@ -15,7 +15,8 @@ TOP = {"mjx_stairs.config", "mjx_stairs.atomic"}  # leaf utilities every layer m
 # config gathers the learner's config dataclasses; the pipelines train; the bench times the trainer
 RL_BEYOND_POLICY = {
     "mjx_stairs.study.experiment": {"networks", "ppo", "trainer", "logger"},
-    "mjx_stairs.study.exp1": {"runner", "logger"},
+    "mjx_stairs.study.exp1": {"runner"},
+    "mjx_stairs.study.plots": {"logger"},  # reads metrics.jsonl
     "mjx_stairs.study.transfer": {"runner"},
     "mjx_stairs.study.bench": {"trainer", "rollout"},
 }

@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any, Literal
 
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 from mujoco import mjx
+from mujoco.mjx._src import collision_driver
 
+from mjx_stairs.config import ConfigError
 from mjx_stairs.sim import contact  # noqa: F401  (registers the 'nearest' terrain collider)
 
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
@@ -74,8 +77,32 @@ class RobotConfig:
     shin_collision: bool = True  # collide the mid-shin spheres with the terrain
     # Sphere-terrain collider: "mjx" (MJX's prism collider, 4 contacts per sphere) or "nearest"
     # (mjx_stairs.sim.contact: the exact nearest surface point, 2 contacts per sphere).
-    terrain_contacts: str = "mjx"
+    terrain_contacts: Literal["mjx", "nearest"] = "mjx"
     friction: float = 0.8  # foot-terrain sliding friction
+
+
+PHYSICS = {
+    "reference": {"terrain_contacts": "mjx", "shin_collision": True, "ls_iterations": 5},
+    "lean": {"terrain_contacts": "nearest", "shin_collision": False, "ls_iterations": 3},
+}
+"""Physics presets, named by ``robot.physics = "..."`` in a config table or an override.
+"reference": the physics every published success rate is measured in (the defaults above);
+"lean": the fast training physics of issue 7 (no mid-shin spheres, 3 line-search steps, the
+nearest-point collider), whose policies are evaluated in the reference physics."""
+
+
+def expand_physics_in(table: dict[str, Any], key: str = "robot") -> dict[str, Any]:
+    """A copy of ``table`` in which ``table[key]["physics"]``, if present, is replaced by the
+    fields its preset sets (they win over the same fields beside it)."""
+    robot = table.get(key)
+    if not isinstance(robot, dict) or "physics" not in robot:
+        return table
+    robot = dict(robot)
+    name = robot.pop("physics")
+    if name not in PHYSICS:
+        raise ConfigError(f"config key '{key}.physics': expected one of {list(PHYSICS)}, "
+                          f"got {name!r}")
+    return {**table, key: {**robot, **PHYSICS[name]}}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -218,3 +245,46 @@ def standing_qpos(xy: tuple[float, float] = (0.0, 0.0), z: float = 0.445) -> np.
     qpos[3] = 1.0
     qpos[7:] = NOMINAL_JOINT_POS
     return qpos
+
+
+def sphere_contact_rows(mj_model: mujoco.MjModel, ids: RobotIds) -> dict[str, np.ndarray | None]:
+    """{group: [4, ncon_per_sphere] rows of MJX's contact array} for each sphere group (None for
+    a group that does not collide).
+
+    MJX lays contacts out by collision-function group, each geom pair repeated ncon times; the
+    layout is static, so it is read once here (tests check it against a forward pass).
+    """
+    rows: dict[int, list[int]] = {}
+    i = 0
+    for key, pairs in collision_driver._geom_groups(mj_model).items():
+        ncon = collision_driver._COLLISION_FUNC[key.types].ncon
+        for g1, g2, _ in pairs:
+            for g in (g1, g2):
+                rows.setdefault(int(g), [])
+            rows[int(g2)].extend(range(i, i + ncon))
+            rows[int(g1)].extend(range(i, i + ncon))
+            i += ncon
+    out = {}
+    for group, geoms in (
+        ("foot", ids.foot_geoms),
+        ("knee", ids.knee_geoms),
+        ("shin", ids.shin_geoms),
+        ("trunk", ids.trunk_geoms),
+    ):
+        per = [rows.get(int(g), []) for g in geoms]
+        if all(len(p) == 0 for p in per):  # a group without collision, e.g. shins switched off
+            out[group] = None
+        elif len({len(p) for p in per}) != 1:
+            raise ValueError(f"collision spheres of group {group!r} collide unevenly: {per}")
+        else:
+            out[group] = np.array(per, np.int32)
+    return out
+
+
+def sphere_contacts(data: mjx.Data, rows: dict[str, np.ndarray | None]) -> dict[str, jnp.ndarray]:
+    """{group: [4] bool} which collision spheres touch the terrain (rows: sphere_contact_rows)."""
+    dist = data._impl.contact.dist
+    return {
+        g: jnp.zeros(4, bool) if r is None else jnp.any(dist[r] < 1e-3, axis=-1)
+        for g, r in rows.items()
+    }

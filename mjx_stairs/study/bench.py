@@ -177,7 +177,7 @@ def run_bench(
             "terrain_contacts": config.env.robot.terrain_contacts,
         },
         "network": {"conv_impl": config.network.conv_impl},
-        "contacts": int(sum(r.size for r in env._contact_rows.values() if r is not None)),
+        "contacts": env.num_contacts,
         "results": [],
     }
     for n in robots:

@@ -1,4 +1,4 @@
-"""Evaluation: success rate per (policy, family, level), and the critic's value over a tile.
+"""Evaluation: success rate per (policy, family, level).
 
 Success (the protocol's rule, authors' code): planar distance to the goal < 0.5 m and speed
 < 0.3 m/s, held 0.5 s, at any time within the evaluation episode. Evaluation runs the policy's
@@ -21,10 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_stairs import atomic
-from mjx_stairs.config import apply_overrides, from_dict, to_dict
-from mjx_stairs.env import stair_env as envlib
-from mjx_stairs.rl.policy import Policy, load_policy, policy_action, policy_value, saved_config
-from mjx_stairs.sim.robot import NOMINAL_BASE_HEIGHT
+from mjx_stairs.env.config import EnvConfig, env_config_from, evaluation_config
+from mjx_stairs.env.stair_env import StairEnv
+from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config
 from mjx_stairs.study.experiment import TerrainConfig, build_atlas
 
 
@@ -41,21 +40,18 @@ class EvalSpec:
     resolution: float = 0.025
     tile_size: float = 10.0
     # "key=value" overrides of the policy's env config, keys relative to [env], e.g.
-    # "robot.shin_collision=true": evaluate a policy trained with cheaper physics settings in the
+    # "robot.physics=reference": evaluate a policy trained with cheaper physics settings in the
     # reference physics
     env_overrides: tuple[str, ...] = ()
 
 
-def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> envlib.EnvConfig:
+def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> EnvConfig:
     """The EnvConfig the policy was trained with (robot, PD, obs layout), from its metadata,
-    with ``overrides`` ("robot.ls_iterations=5", ...) applied."""
-    cfg = saved_config(policy, "env")
-    if cfg is None:
-        cfg = to_dict(envlib.EnvConfig())
-    return from_dict(envlib.EnvConfig, apply_overrides(cfg, overrides), prefix="env")
+    with ``overrides`` ("robot.physics=reference", ...) applied."""
+    return env_config_from(saved_config(policy, "env"), overrides)
 
 
-def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[envlib.StairEnv, Any]:
+def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[StairEnv, Any]:
     """An evaluation env over an atlas of the spec's family: rows = levels, 2 columns."""
     import terrains
 
@@ -70,8 +66,8 @@ def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[envlib.StairEnv, Any]
             tile_size=spec.tile_size,
         )
     )
-    cfg = envlib.evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
-    return envlib.StairEnv(atlas, cfg), levels
+    cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
+    return StairEnv(atlas, cfg), levels
 
 
 def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
@@ -149,17 +145,17 @@ def schedule_cells(family: str, schedule: str, levels: Sequence[int] = ()) -> tu
     return tuple((family, schedule, int(lv)) for lv in chosen)
 
 
-def cell_env(policy: Policy, spec: CellSpec) -> envlib.StairEnv:
+def cell_env(policy: Policy, spec: CellSpec) -> StairEnv:
     """The evaluation env of `policy` (its env config with the spec's overrides) over an atlas
     with one row per cell, two variants each."""
     import terrains
 
     atlas = terrains.build_cell_atlas(spec.cells, 2, spec.resolution, spec.tile_size)
-    cfg = envlib.evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
-    return envlib.StairEnv(atlas, cfg)
+    cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
+    return StairEnv(atlas, cfg)
 
 
-def initial_states(env: envlib.StairEnv, spec: CellSpec):
+def initial_states(env: StairEnv, spec: CellSpec):
     """[cells * robots_per_cell] robots on their cells' spawns (row-major by cell)."""
     B = len(spec.cells) * spec.robots_per_cell
     row = jnp.repeat(jnp.arange(len(spec.cells), dtype=jnp.int32), spec.robots_per_cell)
@@ -263,144 +259,3 @@ def markdown_table(results: Sequence[dict[str, Any]]) -> str:
     n = results[0]["robots_per_level"] if results else 0
     rows.append(f"\nSuccess in % of {n} robots per cell, one episode each.")
     return "\n".join(rows) + "\n"
-
-
-# ----------------------------------------------------------------------------- critic heat map
-
-
-def critic_map(
-    policy: Policy,
-    family: str = "u_shaped",
-    level: int = 2,
-    variant: int = 0,
-    spacing: float = 0.1,
-    schedule: str = "test",
-    resolution: float = 0.025,
-    tile_size: float = 10.0,
-) -> dict[str, np.ndarray]:
-    """The critic's value over a tile's x-y grid (the paper's Figure 4).
-
-    At each grid point the robot stands upright at its nominal height above the terrain, faces
-    along the nearest centre-line segment, velocities and last action zero; it sees the local
-    height map and the goal. Points on walls are NaN.
-    Returns {"x": [nx], "y": [ny], "value": [ny, nx], "heights": tile heights
-    [ny_t, nx_t], "extent": (x0, x1, y0, y1), "goal": [4], "centreline": [K, 3]}.
-    """
-    spec = EvalSpec(
-        family=family,
-        schedule=schedule,
-        levels=(level,),
-        robots_per_level=1,
-        resolution=resolution,
-        tile_size=tile_size,
-    )
-    env, _ = make_eval_env(policy, spec)
-    tile = variant
-    ox, oy = (float(v) for v in env.tile_origin[tile])
-    xs = np.arange(ox + 0.2, ox + tile_size - 0.2 + 1e-9, spacing)
-    ys = np.arange(oy + 0.2, oy + tile_size - 0.2 + 1e-9, spacing)
-    gx, gy = np.meshgrid(xs, ys, indexing="xy")
-    line = np.asarray(env._line[tile])
-
-    def yaw_at(x, y):
-        d = np.linalg.norm(line[None, :-1] - np.stack([x, y], -1)[:, None], axis=-1)
-        seg = np.diff(line, axis=0)
-        seg_len = np.linalg.norm(seg, axis=-1)
-        d = np.where(seg_len[None] > 1e-6, d, np.inf)
-        i = d.argmin(1)
-        return np.arctan2(seg[i, 1], seg[i, 0])
-
-    yaw = yaw_at(gx.ravel(), gy.ravel())
-
-    def obs_at(x, y, psi):
-        z = env.terrain_height(x, y) + NOMINAL_BASE_HEIGHT
-        qpos = jnp.concatenate([jnp.stack([x, y, z]), envlib.yaw_quat(psi), env._nominal])
-        info = {"tile": jnp.int32(tile), "last_action": jnp.zeros(12)}
-        return env._observe(qpos, jnp.zeros(18), info, jax.random.PRNGKey(0))["privileged_state"]
-
-    obs = jax.jit(jax.vmap(obs_at))(
-        jnp.asarray(gx.ravel(), jnp.float32),
-        jnp.asarray(gy.ravel(), jnp.float32),
-        jnp.asarray(yaw, jnp.float32),
-    )
-    values = np.asarray(jax.jit(lambda o: policy_value(policy, o))(obs)).reshape(gx.shape)
-    # Walls are not walkable: leave them blank (above the goal landing by more than a riser).
-    ground = np.asarray(jax.jit(env.terrain_height)(jnp.asarray(gx), jnp.asarray(gy)))
-    goal_z = float(env._goal[tile][2])
-    values = np.where(ground > goal_z + 0.3, np.nan, values)
-    n = int(round(tile_size / resolution))
-    i0, j0 = int(round(oy / resolution)), int(round(ox / resolution))
-    heights = np.asarray(env.robot.mj_model.hfield_data).reshape(env.atlas_shape)
-    heights = env._h_lo + env._h_span * heights[i0 : i0 + n + 1, j0 : j0 + n + 1]
-    return {
-        "x": xs,
-        "y": ys,
-        "value": values,
-        "heights": heights,
-        "extent": (ox, ox + tile_size, oy, oy + tile_size),
-        "goal": np.asarray(env._goal[tile]),
-        "centreline": line,
-    }
-
-
-def plot_critic_map(m: dict[str, np.ndarray], path: str | os.PathLike, title: str = "") -> None:
-    """Heat map of the critic's value with the terrain's contours, goal and centre-line."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 5.2), dpi=110)
-    im = ax.imshow(m["value"], origin="lower", extent=m["extent"], cmap="viridis")
-    x0, x1, y0, y1 = m["extent"]
-    hy, hx = m["heights"].shape
-    ax.contour(
-        np.linspace(x0, x1, hx),
-        np.linspace(y0, y1, hy),
-        m["heights"],
-        levels=12,
-        colors="white",
-        linewidths=0.4,
-        alpha=0.6,
-    )
-    ax.plot(m["centreline"][:, 0], m["centreline"][:, 1], "w--", lw=1, label="centre-line")
-    ax.plot(m["goal"][0], m["goal"][1], "r*", ms=14, label="goal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title or "critic value")
-    ax.legend(loc="upper right", fontsize=7)
-    fig.colorbar(im, ax=ax, label="V")
-    fig.tight_layout()
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)
-
-
-def plot_success(
-    curves: dict[str, dict[str, Any]],
-    path: str | os.PathLike,
-    paper: dict[int, float] | None = None,
-    title: str = "U-shaped stairs: success by test level",
-) -> None:
-    """Success against level for several policies, the paper's points overlaid."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4), dpi=110)
-    for name, r in curves.items():
-        ax.plot(r["levels"], [100 * s for s in r["success"]], "o-", label=name)
-    if paper:
-        lv = sorted(paper)
-        ax.plot(lv, [paper[k] for k in lv], "k*", ms=12, label="paper (Table 1)")
-    ax.set_xlabel("test level (riser 4, 6, 8, 10, 12, 14 cm)")
-    ax.set_ylabel("success (%)")
-    ax.set_ylim(-3, 103)
-    ax.grid(alpha=0.3)
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)

@@ -15,9 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from mjx_stairs import atomic
-from mjx_stairs.rl import logger as logging_utils
 from mjx_stairs.rl.policy import load_policy
-from mjx_stairs.study import evaluate
+from mjx_stairs.study import evaluate, plots
+from mjx_stairs.study.critic_map import critic_map
 
 PAPER_U_SUCCESS = {3: 91.3, 4: 87.7}
 """Paper, Table 1: U-shaped model on U-shaped stairs, test levels 3 and 4 (%)."""
@@ -45,15 +45,15 @@ def report(
         r = evaluate.success_by_level(policy, spec)
         r["checkpoint"] = str(path)
         results[name] = r
-    evaluate.plot_success(results, out / "fig2_u_success.png", paper=PAPER_U_SUCCESS)
-    m = evaluate.critic_map(
+    plots.plot_success(results, out / "fig2_u_success.png", paper=PAPER_U_SUCCESS)
+    m = critic_map(
         load_policy(stage2),
         "u_shaped",
         critic_level - 1,
         resolution=spec.resolution,
         tile_size=spec.tile_size,
     )
-    evaluate.plot_critic_map(
+    plots.plot_critic_map(
         m, out / "fig4_critic_u.png", f"critic value, U-shaped test level {critic_level}"
     )
     summary = {"spec": dataclasses.asdict(spec), "results": results, "paper": PAPER_U_SUCCESS}
@@ -81,45 +81,6 @@ def markdown(results: dict[str, dict[str, Any]]) -> str:
         f"{n} robots per cell, one episode each."
     )
     return "\n".join(rows) + "\n"
-
-
-CURVE_KEYS = (
-    ("success", "success (share of ended episodes)"),
-    ("level", "mean curriculum level (0-based)"),
-    ("episode/return", "episode return"),
-)
-
-
-def read_metrics(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """The rows of a run's metrics (a run or published directory, or its metrics.jsonl)."""
-    p = Path(path)
-    rows = logging_utils.read_jsonl(p / "metrics.jsonl" if p.is_dir() else p)
-    if not rows or "env_steps" not in rows[0]:
-        raise ValueError(f"{p}: no training rows (env_steps missing)")
-    return rows
-
-
-def plot_curves(runs: dict[str, str | os.PathLike], path: str | os.PathLike) -> None:
-    """Training curves against env steps: success, mean level and return, one line per run."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    data = {name: read_metrics(p) for name, p in runs.items()}
-    fig, axes = plt.subplots(1, len(CURVE_KEYS), figsize=(5 * len(CURVE_KEYS), 3.6), dpi=100)
-    for ax, (key, label) in zip(axes, CURVE_KEYS, strict=True):
-        for name, rows in data.items():
-            xs = [r["env_steps"] / 1e6 for r in rows if key in r]
-            ax.plot(xs, [r[key] for r in rows if key in r], label=name, lw=1.2)
-        ax.set_xlabel("env steps (M)")
-        ax.set_title(label, fontsize=10)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
-    fig.tight_layout()
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)
 
 
 STAGES = ("stage1", "stage2_u", "stage2_u_no_stall")

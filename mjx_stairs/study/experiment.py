@@ -15,8 +15,9 @@ from typing import Any, Iterable
 import jax
 
 from mjx_stairs.config import ConfigError, apply_overrides, from_dict, read_toml
+from mjx_stairs.env.config import EnvConfig
 from mjx_stairs.env.rewards import PRESETS
-from mjx_stairs.env.stair_env import EnvConfig, StairEnv
+from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.rl.networks import NetworkConfig
 from mjx_stairs.rl.ppo import PPOConfig
 from mjx_stairs.rl.trainer import TrainConfig

@@ -37,11 +37,7 @@ TILE_MARGIN = 4
 
 def env_heights(env: envlib.StairEnv) -> np.ndarray:
     """[NY, NX] the atlas heights back from the env's MuJoCo model (float32 rounding)."""
-    mj = env.robot.mj_model
-    ny, nx = env.atlas_shape
-    hid = env.robot.ids.hfield_geom
-    data = np.asarray(mj.hfield_data, np.float64).reshape(ny, nx)
-    return data * float(mj.hfield_size[0][2]) + float(mj.geom_pos[hid][2])
+    return env.terrain.heights()
 
 
 def tile_model(env: envlib.StairEnv, tile: int, tile_size: float,
@@ -123,7 +119,7 @@ def success_in_ground_truth(
     batch = bw.Batch([models[int(t)] for t in tiles], np.asarray(state.pipeline_state.qpos),
                      nthread=nthread)
     goal = np.asarray(env.goals)[tiles]
-    observe = jax.jit(jax.vmap(env.observe))
+    observe = jax.jit(jax.vmap(lambda q, v, i: env.observe(q, v, i)["state"]))
     act = jax.jit(lambda o: policy_action(policy, o))
     c = env.config
     ep = _Episodes(B, max(1, int(round(c.success_hold_s / env.dt))))
@@ -188,7 +184,7 @@ def first_second(
     robots = [(models[int(t)], mujoco.MjData(models[int(t)])) for t in tiles]
     for (_, d), q in zip(robots, np.asarray(state.pipeline_state.qpos), strict=True):
         d.qpos[:] = q
-    observe = jax.jit(jax.vmap(env.observe))
+    observe = jax.jit(jax.vmap(lambda q, v, i: env.observe(q, v, i)["state"]))
     act = jax.jit(lambda o: policy_action(policy, o))
     c = env.config
     warm, steps = int(round(warmup_s / env.dt)), int(round(horizon_s / env.dt))

@@ -29,34 +29,19 @@ import jax
 import numpy as np
 
 from mjx_stairs import atomic
+from mjx_stairs.env import observation
+from mjx_stairs.env.config import env_config_from
 from mjx_stairs.rl.policy import (
     STD_EPS,
     Policy,
     load_policy,
     normaliser_constants,
     policy_action,
+    saved_config,
 )
 from mjx_stairs.sim import robot as rb
-from mjx_stairs.study.evaluate import env_config_of
 
 OPSET = 17
-
-# The observation vector of mjx_stairs.env (StairEnv._observe), in order: (name, size, unit,
-# description). The height map follows.
-OBS_VECTOR = (
-    ("base_lin_vel", 3, "m/s", "base linear velocity in the base (body) frame"),
-    ("base_ang_vel", 3, "rad/s", "base angular velocity in the base frame (IMU gyro)"),
-    ("projected_gravity", 3, "1", "unit gravity vector (0, 0, -1) in the base frame"),
-    ("joint_pos", 12, "rad", "joint positions minus the nominal pose, joint_names order"),
-    ("joint_vel", 12, "rad/s", "joint velocities, joint_names order"),
-    ("last_action", 12, "1", "the previous policy action, clipped to +-action_clip"),
-    ("goal", 4, "m, m, m, rad",
-     "goal position minus base position in the base frame (x, y, z), then the yaw error "
-     "goal_yaw - base_yaw wrapped to [-pi, pi)"),
-)
-NOISE_GROUP = {"base_lin_vel": "lin_vel", "base_ang_vel": "ang_vel", "projected_gravity": "gravity",
-               "joint_pos": "joint_pos", "joint_vel": "joint_vel", "height_map": "height"}
-
 
 class ExportError(RuntimeError):
     """The policy cannot be exported (missing onnx, unsupported layout)."""
@@ -185,10 +170,10 @@ def build_onnx(policy: Policy, opset: int = OPSET):
 
 def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
     """What a runner needs beside the graph, as a JSON-serialisable dict."""
-    cfg = env_config_of(policy)
+    cfg = env_config_from(saved_config(policy, "env"))
     layout = policy.layout
     hm = cfg.height_map
-    n_vec = sum(n for _, n, _, _ in OBS_VECTOR)
+    n_vec = observation.N_VEC
     if layout.n_vec != n_vec or tuple(layout.map_shape) not in ((hm.size, hm.size),):
         raise ExportError(
             f"policy layout (vec {layout.n_vec}, map {tuple(layout.map_shape)}) is not the stair "
@@ -196,28 +181,23 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
         )
     noise = cfg.noise
     entries, i = [], 0
-    for nm, n, unit, desc in OBS_VECTOR:
-        group = NOISE_GROUP.get(nm)
-        if nm == "goal" and cfg.goal_mode == "waypoint":
+    for term in observation.terms(hm):
+        desc = term.description
+        if term.name == "goal" and cfg.goal_mode == "waypoint":
             desc = (
                 f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
                 "further along the stair centre-line than the base's projection on it, with the "
                 "centre-line's heading there as its yaw, and the final goal (position and yaw) "
                 f"once that is nearer than {cfg.waypoint_lookahead_m:g} m along the line "
-                "(mjx_stairs.env.stair_env.StairEnv.goal_target)"
+                "(mjx_stairs.env.tiles.TileTables.waypoint)"
             )
-        entries.append({"name": nm, "start": i, "stop": i + n, "unit": unit,
-                        "description": desc,
-                        "training_noise": getattr(noise, group) if group else 0.0})
-        i += n
+        if term.name == "height_map":
+            desc = f"{desc}; index = {i} + row * {hm.size} + col"
+        entries.append({"name": term.name, "start": i, "stop": i + term.size, "unit": term.unit,
+                        "scale": term.scale, "description": desc,
+                        "training_noise": getattr(noise, term.noise) if term.noise else 0.0})
+        i += term.size
     half = 0.5 * (hm.size - 1) * hm.spacing
-    entries.append({
-        "name": "height_map", "start": i, "stop": i + hm.size * hm.size, "unit": "m",
-        "description": (f"{hm.size} x {hm.size} heights, row-major: index = {i} + row * "
-                        f"{hm.size} + col; value = clip(base_z - terrain_z(p) - {hm.offset}, "
-                        f"-{hm.clip}, {hm.clip})"),
-        "training_noise": noise.height,
-    })
     robot = cfg.robot
     dt = robot.timestep * cfg.decimation
     norm = normaliser_constants(policy)
@@ -235,7 +215,7 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
         "observation": {
             "size": layout.obs_size,
             "layout": entries,
-            "scales": "none: every entry is in the SI unit given; the graph's normaliser "
+            "scales": "every entry is its SI value times its scale (1); the graph's normaliser "
                       "(mean/std from training) does all scaling",
             "noise": (f"the graph adds no noise; training added uniform noise of the given "
                       f"half-widths ({'on' if noise.enabled else 'off'} in training)"),

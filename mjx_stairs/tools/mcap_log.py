@@ -41,6 +41,7 @@ import mujoco
 import numpy as np
 
 from mjx_stairs.atomic import atomic_path
+from mjx_stairs.env.geometry import quat_yaw, yaw_quat
 from mjx_stairs.sim import robot as rb
 
 NS = 1_000_000_000
@@ -252,15 +253,6 @@ def _rgba(c) -> dict[str, float]:
     return {"r": float(c[0]), "g": float(c[1]), "b": float(c[2]), "a": float(c[3])}
 
 
-def _yaw_quat(yaw: float) -> np.ndarray:
-    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
-
-
-def _quat_yaw(q) -> float:
-    w, x, y, z = (float(v) for v in q)
-    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
-
-
 def body_transforms(model: mujoco.MjModel, data: mujoco.MjData,
                     qpos: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """[(body id, position in parent, quat wxyz in parent)] for every body below the base."""
@@ -445,8 +437,7 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
             **(policy_meta or {}),
         })
 
-        heights = np.asarray(model.hfield_data, np.float64).reshape(env.atlas_shape)
-        heights = env._h_lo + env._h_span * heights
+        heights = env.terrain.heights()
         put("/terrain", 0, {"deletions": [],
                             "entities": [terrain_entity(heights, env.resolution)]})
         put("/robot_model", 0, {"deletions": [], "entities": [
@@ -460,13 +451,13 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
             for i in range(r.num_robots):
                 q = r.qpos[k, i]
                 pre = f"robot{i}"
-                yaw = _quat_yaw(q[3:7])
+                yaw = quat_yaw(np.asarray(q[3:7], np.float64), np)
                 transforms.append({"timestamp": ts, "parent_frame_id": "world",
                                    "child_frame_id": f"{pre}/base", "translation": _v3(q[:3]),
                                    "rotation": _q(q[3:7])})
                 transforms.append({"timestamp": ts, "parent_frame_id": "world",
                                    "child_frame_id": f"{pre}/heading",
-                                   "translation": _v3(q[:3]), "rotation": _q(_yaw_quat(yaw))})
+                                   "translation": _v3(q[:3]), "rotation": _q(yaw_quat(yaw, np))})
                 for b, pos, quat in body_transforms(model, data, q):
                     parent = model.body(model.body_parentid[b]).name
                     transforms.append({"timestamp": ts,
@@ -480,7 +471,7 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
                 q = r.qpos[k, i]
                 goal = r.goal[k, i]
                 put(tp[0], t_ns, {"timestamp": ts, "frame_id": "world",
-                                  "pose": _pose_msg(goal[:3], _yaw_quat(float(goal[3])))})
+                                  "pose": _pose_msg(goal[:3], yaw_quat(float(goal[3]), np))})
                 if k == 0 or r.step[k, i] == 0:  # a new episode (0: fresh after a reset)
                     paths[i] = []
                 pose = _pose_msg(q[:3], q[3:7])

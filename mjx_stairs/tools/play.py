@@ -39,9 +39,9 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mjx_stairs.atomic import atomic_path  # noqa: E402
-from mjx_stairs.env import stair_env as envlib  # noqa: E402
-from mjx_stairs.rl.policy import Policy, load_policy, policy_action  # noqa: E402
-from mjx_stairs.study.evaluate import env_config_of  # noqa: E402
+from mjx_stairs.env.config import env_config_from, evaluation_config  # noqa: E402
+from mjx_stairs.env.stair_env import StairEnv  # noqa: E402
+from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config  # noqa: E402
 from mjx_stairs.study.experiment import TerrainConfig, build_atlas  # noqa: E402
 
 
@@ -126,7 +126,7 @@ def check_spec(spec: PlaySpec) -> None:
         raise ValueError(f"seconds must be > 0, got {spec.seconds}")
 
 
-def make_play_env(policy: Policy, spec: PlaySpec) -> envlib.StairEnv:
+def make_play_env(policy: Policy, spec: PlaySpec) -> StairEnv:
     """The evaluation env of the policy on an atlas of one tile: `spec.family` at `spec.level`."""
     check_spec(spec)
     atlas = build_atlas(
@@ -140,8 +140,9 @@ def make_play_env(policy: Policy, spec: PlaySpec) -> envlib.StairEnv:
             border=spec.border,
         )
     )
-    cfg = envlib.evaluation_config(env_config_of(policy), spec.episode_length_s)
-    env = envlib.StairEnv(atlas, cfg)
+    cfg = evaluation_config(env_config_from(saved_config(policy, "env")),
+                            spec.episode_length_s)
+    env = StairEnv(atlas, cfg)
     n = env.observation_size["state"][0]
     if policy.layout.obs_size != n or tuple(policy.layout.map_shape) != env.map_shape:
         raise ValueError(
@@ -152,7 +153,7 @@ def make_play_env(policy: Policy, spec: PlaySpec) -> envlib.StairEnv:
     return env
 
 
-def rollout(policy: Policy, spec: PlaySpec, env: envlib.StairEnv | None = None) -> Rollout:
+def rollout(policy: Policy, spec: PlaySpec, env: StairEnv | None = None) -> Rollout:
     """Run `spec.robots` robots for `spec.seconds` with the policy's mean action; record frames."""
     env = make_play_env(policy, spec) if env is None else env
     T = max(1, int(round(spec.seconds / env.dt)))
@@ -161,7 +162,7 @@ def rollout(policy: Policy, spec: PlaySpec, env: envlib.StairEnv | None = None) 
     zeros = jnp.zeros(B, jnp.int32)
     state = jax.jit(jax.vmap(env.reset_at))(keys, zeros, zeros)
     clip = env.config.action_clip
-    goals = env._goal
+    goals = env.tiles.goal
 
     def body(st, _):
         action = policy_action(policy, st.obs["state"])
@@ -328,7 +329,7 @@ def write_video(frames: np.ndarray, path: str | os.PathLike, fps: float) -> None
 
 
 def render_video(
-    env: envlib.StairEnv,
+    env: StairEnv,
     r: Rollout,
     path: str | os.PathLike,
     robot: int = 0,

@@ -9,8 +9,12 @@ import pytest
 
 import terrains
 from mjx_stairs.env import curriculum as cur
+from mjx_stairs.env import observation
 from mjx_stairs.env import rewards as rw
-from mjx_stairs.env.stair_env import EnvConfig, StairEnv
+from mjx_stairs.env.config import EnvConfig
+from mjx_stairs.env.geometry import quat_to_mat
+from mjx_stairs.env.stair_env import StairEnv
+from mjx_stairs.sim import robot as rb
 
 B = 8
 LEVELS = (0, 6)  # pyramid level 1 is flat, level 7 has 0.1 m risers
@@ -53,10 +57,10 @@ def test_contact_layout_matches_a_forward_pass(env):
     mx = env.robot.mjx_model
     d = jax.jit(mjx.forward)(mx, mjx.make_data(mx))
     geom = np.asarray(d._impl.contact.geom)
-    for group, ids in (("foot", env._ids.foot_geoms), ("trunk", env._ids.trunk_geoms)):
-        rows = env._contact_rows[group]
+    for group, ids in (("foot", env.robot.ids.foot_geoms), ("trunk", env.robot.ids.trunk_geoms)):
+        rows = env.contact_rows[group]
         for k, g in enumerate(ids):
-            assert np.all(geom[rows[k]] == [env._ids.hfield_geom, g])
+            assert np.all(geom[rows[k]] == [env.robot.ids.hfield_geom, g])
 
 
 def test_reset_and_step_100_steps(env, fns):
@@ -93,7 +97,7 @@ def test_a_robot_whose_physics_blows_up_is_reset_and_the_others_step_on(env, fns
                  (hit.obs["state"], clean.obs["state"])):
         np.testing.assert_array_equal(np.asarray(a)[1:], np.asarray(b)[1:])
     fresh = np.asarray(hit.pipeline_state.qpos[0])
-    assert np.all(np.isfinite(fresh)) and np.allclose(fresh[7:], env._nominal, atol=0.2)
+    assert np.all(np.isfinite(fresh)) and np.allclose(fresh[7:], rb.NOMINAL_JOINT_POS, atol=0.2)
     assert np.all(np.isfinite(np.asarray(hit.pipeline_state.ctrl)))
     for obs in (hit.obs, hit.info["final_obs"]):  # the final obs feeds the value bootstrap
         assert all(np.all(np.isfinite(np.asarray(v))) for v in obs.values())
@@ -154,7 +158,7 @@ def test_nominal_pose_survives_5s_and_tilted_robot_terminates(env, fns):
 def test_episode_end_moves_level_and_reports_success(env, fns):
     state = _reset(env, fns, [0] * B)
     # Robots 0-3 stand still on the goal, 4-7 stay at the spawn; the episode is about to time out.
-    goal = env._goal[state.info["tile"]]
+    goal = env.tiles.goal[state.info["tile"]]
     qpos = state.pipeline_state.qpos
     at_goal = qpos.at[:, 0:2].set(goal[:, :2]).at[:, 2].set(goal[:, 2] + 0.30)
     yaw = goal[:, 3]
@@ -366,18 +370,19 @@ def test_waypoint_goal_is_what_the_policy_sees(u_atlas):
     env = StairEnv(u_atlas, EnvConfig(goal_mode="waypoint"))
     state = jax.jit(env.reset_at)(jax.random.PRNGKey(0), jnp.int32(0), jnp.int32(1))
     qpos = state.pipeline_state.qpos
-    obs = np.asarray(env._observe(qpos, jnp.zeros(18), state.info, None)["privileged_state"])
+    obs = np.asarray(env.observe(qpos, jnp.zeros(18), state.info)["privileged_state"])
     wp = np.asarray(env.goal_target(qpos[:3], state.info["tile"]))
-    from mjx_stairs.env.stair_env import quat_to_mat
-
     rot = np.asarray(quat_to_mat(qpos[3:7]))
-    goal_obs = obs[45:49]
+    start = sum(t.size for t in observation.VECTOR[:-1])  # the goal is the last vector term
+    goal_obs = obs[start:observation.N_VEC]
     np.testing.assert_allclose(goal_obs[:3], rot.T @ (wp[:3] - np.asarray(qpos[:3])), atol=1e-5)
     assert np.linalg.norm(goal_obs[:2]) < 1.2  # the waypoint, not the goal ~2 m across the wall
 
 
 def test_bad_goal_mode_is_a_one_line_error(u_atlas):
-    with pytest.raises(ValueError, match="env.goal_mode: unknown mode 'carrot'"):
-        StairEnv(u_atlas, EnvConfig(goal_mode="carrot"))
+    from mjx_stairs.config import ConfigError, from_dict
+
+    with pytest.raises(ConfigError, match="config key 'env.goal_mode': expected one of"):
+        from_dict(EnvConfig, {"goal_mode": "carrot"}, prefix="env")
     with pytest.raises(ValueError, match="env.waypoint_lookahead_m"):
         StairEnv(u_atlas, EnvConfig(goal_mode="waypoint", waypoint_lookahead_m=0.0))

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from mjx_stairs.env.observation import N_VEC  # the stair env's vector part
 from mjx_stairs.rl import networks
 from mjx_stairs.rl.networks import NetworkConfig, ObsLayout
 
@@ -18,7 +19,7 @@ _init = jax.jit(networks.init_params, static_argnums=(1, 2, 3, 4))
 
 def test_param_shapes_for_the_stair_layout():
     cfg = NetworkConfig()
-    p = _init(jax.random.PRNGKey(0), cfg, 49, (21, 21), 12)
+    p = _init(jax.random.PRNGKey(0), cfg, N_VEC, (21, 21), 12)
     shapes = jax.tree_util.tree_map(lambda x: x.shape, p)
     assert [c["w"] for c in shapes["encoder"]["conv"]] == [(3, 3, 1, 8), (3, 3, 8, 16),
                                                            (3, 3, 16, 32)]
@@ -28,9 +29,9 @@ def test_param_shapes_for_the_stair_layout():
     assert [layer["w"] for layer in shapes["critic"]] == [(177, 128), (128, 128), (128, 64),
                                                           (64, 1)]
     np.testing.assert_allclose(jnp.exp(p["log_std"]), np.full(12, 0.8), rtol=1e-6)
-    layout = ObsLayout(49, (21, 21))
-    assert layout.obs_size == 490
-    obs = jax.ShapeDtypeStruct((3, 5, 490), jnp.float32)
+    layout = ObsLayout(N_VEC, (21, 21))
+    assert layout.obs_size == N_VEC + 441
+    obs = jax.ShapeDtypeStruct((3, 5, N_VEC + 441), jnp.float32)
     for fn, shape in ((networks.encode, (3, 5, 177)), (networks.actor_mean, (3, 5, 12)),
                       (networks.value, (3, 5))):
         assert jax.eval_shape(lambda p, o, fn=fn: fn(p, o, layout), p, obs).shape == shape
@@ -133,11 +134,11 @@ def test_cnn_mlp_gradient_matches_finite_differences():
 
 
 def test_fused_actor_critic_equals_separate_passes():
-    layout = ObsLayout(49, (21, 21))
-    p = _init(jax.random.PRNGKey(3), NetworkConfig(), 49, (21, 21), 12)
+    layout = ObsLayout(N_VEC, (21, 21))
+    p = _init(jax.random.PRNGKey(3), NetworkConfig(), N_VEC, (21, 21), 12)
     k1, k2 = jax.random.split(jax.random.PRNGKey(4))
-    obs = jax.random.normal(k1, (7, 490))
-    critic_obs = jax.random.normal(k2, (7, 490))
+    obs = jax.random.normal(k1, (7, N_VEC + 441))
+    critic_obs = jax.random.normal(k2, (7, N_VEC + 441))
     mean, value = jax.jit(networks.actor_critic, static_argnums=3)(p, obs, critic_obs, layout)
     np.testing.assert_allclose(mean, networks.actor_mean(p, obs, layout), atol=1e-5)
     np.testing.assert_allclose(value, networks.value(p, critic_obs, layout), atol=1e-5)
@@ -178,8 +179,8 @@ def _encoder_grads(cfg, n_vec, map_shape, n_obs, init_seed, data_seed, bump=None
 
 
 @pytest.mark.parametrize("impl", ["row", "fused"])
-@pytest.mark.parametrize("n_vec,map_shape,flat", [(49, (21, 21), False), (3, (7, 9), False),
-                                                  (49, (21, 21), True), (2, (10, 8), False)])
+@pytest.mark.parametrize("n_vec,map_shape,flat", [(N_VEC, (21, 21), False), (3, (7, 9), False),
+                                                  (N_VEC, (21, 21), True), (2, (10, 8), False)])
 def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape, flat, impl):
     """conv_impl='row' (row-Toeplitz matmuls) and 'fused' (the conv stack with its written-out
     backward pass) are the same function as lax.conv: features and their gradients wrt every

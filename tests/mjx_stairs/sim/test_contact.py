@@ -167,7 +167,8 @@ def test_standing_on_a_slope_agrees_with_mjx_collider():
 
 def test_env_with_nearest_contacts_reads_foot_contacts():
     import terrains
-    from mjx_stairs.env.stair_env import EnvConfig, StairEnv
+    from mjx_stairs.env.config import EnvConfig
+    from mjx_stairs.env.stair_env import StairEnv
 
     atlas = terrains.build_atlas(["pyramid"], "train", levels=[0], variants_per_family=1,
                                  resolution=0.05, tile_size=6.0, border=1.0)
@@ -175,15 +176,15 @@ def test_env_with_nearest_contacts_reads_foot_contacts():
     cfg = dataclasses.replace(cfg, robot=dataclasses.replace(cfg.robot,
                                                              terrain_contacts="nearest"))
     env = StairEnv(atlas, cfg)
-    rows = env._contact_rows["foot"]
+    rows = env.contact_rows["foot"]
     assert rows.shape == (4, 2)
     state = jax.jit(env.reset)(jax.random.PRNGKey(0))
     step = jax.jit(env.step)
     for _ in range(25):  # 0.5 s of standing still
         state = step(state, jnp.zeros(12))
     geom = np.asarray(state.pipeline_state._impl.contact.geom)
-    for k, g in enumerate(env._ids.foot_geoms):
-        assert np.all(geom[rows[k]] == [env._ids.hfield_geom, g])
+    for k, g in enumerate(env.robot.ids.foot_geoms):
+        assert np.all(geom[rows[k]] == [env.robot.ids.hfield_geom, g])
     assert bool(state.info["last_foot_contact"].all())
     assert float(state.pipeline_state.qpos[2]) > 0.2
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import terrains
-from mjx_stairs.env import stair_env as envlib
+from mjx_stairs.env.config import EnvConfig, evaluation_config
+from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.sim import box_world as bw
 from mjx_stairs.sim import robot as rb
 from terrains.boxes import grid_boxes
@@ -46,7 +47,7 @@ def test_pd_actuators_are_the_env_pd_law():
 
 def _env(cells):
     atlas = terrains.build_cell_atlas(cells, 2, resolution=0.05, tile_size=10.0)
-    return envlib.StairEnv(atlas, envlib.evaluation_config(envlib.EnvConfig()))
+    return StairEnv(atlas, evaluation_config(EnvConfig()))
 
 
 def test_a_step_on_a_tile_does_not_depend_on_the_rest_of_the_atlas():

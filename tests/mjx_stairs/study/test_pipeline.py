@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from mjx_stairs import cli
+from mjx_stairs.env import observation
 from mjx_stairs.rl.policy import load_policy
-from mjx_stairs.study import bench, evaluate, exp1, experiment, transfer
+from mjx_stairs.study import bench, critic_map, evaluate, exp1, experiment, plots, transfer
 
 TINY = evaluate.EvalSpec(levels=(0, 5), robots_per_level=2, episode_length_s=1.0, resolution=0.05)
 
@@ -47,7 +48,7 @@ def test_stair_env_trains_two_iterations_with_16_robots(trained):
     facts = json.loads((trained / "stage1" / "run.json").read_text())
     assert facts["env_steps"] == 768 and facts["backend"] == "cpu"
     policy = load_policy(trained / "stage1" / "policy.npz")
-    assert policy.layout.n_vec == 49 and policy.layout.map_shape == (21, 21)
+    assert policy.layout.n_vec == observation.N_VEC and policy.layout.map_shape == (21, 21)
     assert policy.metadata["config"]["terrain"]["families"] == ["pyramid"]
 
 
@@ -82,7 +83,7 @@ def test_eval_env_overrides_change_the_physics_not_the_policy(trained):
 
 
 def test_critic_map_covers_the_tile_and_blanks_walls(trained):
-    m = evaluate.critic_map(
+    m = critic_map.critic_map(
         load_policy(trained / "stage1" / "policy.npz"), "u_shaped", 2, spacing=0.25, resolution=0.05
     )
     v = m["value"]
@@ -161,7 +162,7 @@ def test_training_curves_from_published_runs(trained, tmp_path, capsys):
     out = tmp_path / "curves.png"
     assert cli.main(["curves", f"stage 1={trained / 'stage1'}", "--out", str(out)]) == 0
     assert out.stat().st_size > 5000
-    rows = exp1.read_metrics(trained / "stage1")
+    rows = plots.read_metrics(trained / "stage1")
     assert [r["iteration"] for r in rows] == [1, 2]
     broken = tmp_path / "broken.jsonl"
     broken.write_text('{"env_steps": 1}\n{not json\n')

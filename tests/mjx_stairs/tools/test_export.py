@@ -15,13 +15,14 @@ onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
 
 from mjx_stairs import cli  # noqa: E402
+from mjx_stairs.env import observation  # noqa: E402
 from mjx_stairs.rl import networks, normalizer  # noqa: E402
 from mjx_stairs.rl import policy as policy_lib  # noqa: E402
 from mjx_stairs.sim import robot as rb  # noqa: E402
 from mjx_stairs.study.experiment import ExperimentConfig  # noqa: E402
 from mjx_stairs.tools import export  # noqa: E402
 
-N_VEC, MAP = 49, (21, 21)
+N_VEC, MAP = observation.N_VEC, (21, 21)  # the default height map
 D = N_VEC + MAP[0] * MAP[1]
 
 
@@ -125,7 +126,9 @@ def test_graph_structure(exported):
 def test_sidecar_layout_matches_the_env(exported):
     """Every named range of the sidecar holds what the env's observation puts there."""
     import terrains
-    from mjx_stairs.env.stair_env import EnvConfig, StairEnv, quat_to_mat, wrap_angle
+    from mjx_stairs.env.config import EnvConfig
+    from mjx_stairs.env.geometry import quat_to_mat, wrap_angle
+    from mjx_stairs.env.stair_env import StairEnv
 
     _, side = exported
     layout = side["observation"]["layout"]
@@ -142,7 +145,7 @@ def test_sidecar_layout_matches_the_env(exported):
     qvel = rng.normal(size=18).astype(np.float32)
     last = rng.uniform(-1, 1, 12).astype(np.float32)
     info = {"tile": jnp.int32(0), "last_action": jnp.asarray(last)}
-    obs = np.asarray(env._observe(jnp.asarray(qpos), jnp.asarray(qvel), info, None)["state"])
+    obs = np.asarray(env.observe(jnp.asarray(qpos), jnp.asarray(qvel), info)["state"])
     part = {e["name"]: obs[e["start"]:e["stop"]] for e in layout}
     rot = np.asarray(quat_to_mat(jnp.asarray(qpos[3:7])))
     yaw = np.arctan2(rot[1, 0], rot[0, 0])

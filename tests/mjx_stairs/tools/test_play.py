@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from mjx_stairs import cli
+from mjx_stairs.env import observation
 from mjx_stairs.rl import networks, normalizer
 from mjx_stairs.rl import policy as policy_lib
 from mjx_stairs.sim import robot as rb
@@ -23,16 +24,19 @@ FRAMES = 50  # SECONDS / 0.02
 ARGS = ["--family", "straight", "--level", "3", "--robots", str(ROBOTS), "--seconds",
         str(SECONDS), "--resolution", "0.05", "--seed", "3"]
 
+N_VEC, MAP = observation.N_VEC, (21, 21)  # the default height map
+D = N_VEC + MAP[0] * MAP[1]
+
 
 @pytest.fixture(scope="module")
 def policy_file(tmp_path_factory):
     """A fresh (untrained) policy whose actions are of order 1, so the robots move."""
     cfg = ExperimentConfig()
-    params = networks.init_params(jax.random.PRNGKey(0), cfg.network, 49, (21, 21), 12)
+    params = networks.init_params(jax.random.PRNGKey(0), cfg.network, N_VEC, MAP, 12)
     params["actor"][-1]["w"] = params["actor"][-1]["w"] * 30.0
-    norm = {k: normalizer.init_stats(490) for k in policy_lib.OBS_KEYS}
+    norm = {k: normalizer.init_stats(D) for k in policy_lib.OBS_KEYS}
     path = tmp_path_factory.mktemp("play") / "policy.npz"
-    policy_lib.save_policy(path, params, norm, 0, cfg, networks.ObsLayout(49, (21, 21)))
+    policy_lib.save_policy(path, params, norm, 0, cfg, networks.ObsLayout(N_VEC, MAP))
     return path
 
 
@@ -70,7 +74,7 @@ def log(played):
 def test_rollout_shapes_and_consistency(played):
     r = played.rollout
     assert r.num_frames == FRAMES and r.num_robots == ROBOTS and r.dt == pytest.approx(0.02)
-    assert r.qpos.shape == (FRAMES, ROBOTS, 19) and r.obs.shape == (FRAMES, ROBOTS, 490)
+    assert r.qpos.shape == (FRAMES, ROBOTS, 19) and r.obs.shape == (FRAMES, ROBOTS, D)
     assert np.isfinite(r.qpos).all() and np.isfinite(r.reward).all()
     # the observation of each frame belongs to that frame's qpos
     np.testing.assert_allclose(r.obs[..., 9:21], r.qpos[..., 7:] - rb.NOMINAL_JOINT_POS,
@@ -208,7 +212,7 @@ def test_mcap_rewards_contacts_height_map(played, log):
         grids = [m for _, m in log[f"/robot{i}/height_map"]]
         assert grids[0]["column_count"] == 21 and grids[0]["cell_size"]["x"] == 0.2
         values = np.stack([np.frombuffer(base64.b64decode(g["data"]), "<f4") for g in grids])
-        np.testing.assert_array_equal(values, r.obs[:, i, 49:])
+        np.testing.assert_array_equal(values, r.obs[:, i, N_VEC:])
         status = [m for _, m in log[f"/robot{i}/status"]]
         np.testing.assert_array_equal([m["done"] for m in status], r.done[:, i] > 0)
 
@@ -233,7 +237,7 @@ def test_mcap_terrain_mesh(played, log):
     idx = np.array(tri["indices"])
     assert len(idx) % 3 == 0 and idx.max() < len(pts) and len(tri["colors"]) == len(pts)
     env = played.env
-    hf = env._h_lo + env._h_span * np.asarray(env.robot.mj_model.hfield_data)
+    hf = env.terrain.heights()
     assert pts[:, 2].max() == pytest.approx(hf.max(), abs=1e-3)  # the top landing is there
     assert pts[:, 0].max() == pytest.approx((env.atlas_shape[1] - 0.5) * env.resolution)
 
@@ -310,9 +314,9 @@ def test_a_policy_trained_with_a_bf16_encoder_loads_in_float32(policy_file, tmp_
     ref = policy_lib.load_policy(policy_file)
     path = tmp_path / "bf16.npz"
     policy_lib.save_policy(path, ref.params, ref.normalizer, 0, cfg,
-                           networks.ObsLayout(49, (21, 21)))
+                           networks.ObsLayout(N_VEC, MAP))
     pol = policy_lib.load_policy(path)
     assert pol.network.conv_impl == "auto" and pol.metadata["network"]["conv_impl"] == "fused_bf16"
-    obs = jax.random.normal(jax.random.PRNGKey(2), (4, 490))
+    obs = jax.random.normal(jax.random.PRNGKey(2), (4, D))
     np.testing.assert_array_equal(policy_lib.policy_action(pol, obs),
                                   policy_lib.policy_action(ref, obs))

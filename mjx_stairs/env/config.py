@@ -1,0 +1,103 @@
+"""The stair env's settings: frozen dataclasses, saved whole in every policy file."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Literal, Sequence
+
+from mjx_stairs.config import apply_overrides, from_dict, to_dict
+from mjx_stairs.env import curriculum as cur
+from mjx_stairs.env import rewards as rw
+from mjx_stairs.sim import robot as rb
+
+
+@dataclasses.dataclass(frozen=True)
+class NoiseConfig:
+    """Uniform observation noise half-widths per group (actor stream only)."""
+
+    enabled: bool = True
+    lin_vel: float = 0.1
+    ang_vel: float = 0.2
+    gravity: float = 0.05
+    joint_pos: float = 0.01
+    joint_vel: float = 1.5
+    height: float = 0.1
+
+
+@dataclasses.dataclass(frozen=True)
+class HeightMapConfig:
+    """The local height map."""
+
+    size: int = 21  # points per side
+    spacing: float = 0.2  # m between points (21 x 0.2 -> 4 m x 4 m)
+    offset: float = 0.4  # subtracted from base z - terrain z
+    clip: float = 3.0  # |value| clip (m)
+
+
+@dataclasses.dataclass(frozen=True)
+class RandomizationConfig:
+    """Domain randomisation, per robot, resampled at every reset (off in evaluation)."""
+
+    enabled: bool = True
+    friction: tuple[float, float] = (0.4, 1.2)
+    added_mass: tuple[float, float] = (-1.0, 2.0)  # kg on the trunk
+    com_shift: float = 0.03  # m, uniform +- on the trunk CoM in x, y, z
+    motor_strength: tuple[float, float] = (0.9, 1.1)  # scales the torque per joint
+    kp_scale: tuple[float, float] = (0.9, 1.1)
+    kd_scale: tuple[float, float] = (0.9, 1.1)
+    push_interval_s: float = 8.0  # a push every this many seconds (0: never)
+    push_velocity: float = 0.5  # m/s, uniform +- added to the base xy velocity
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """The stair env."""
+
+    robot: rb.RobotConfig = rb.RobotConfig()
+    rewards: rw.RewardConfig = rw.STAGE1
+    curriculum: cur.CurriculumConfig = cur.CurriculumConfig()
+    noise: NoiseConfig = NoiseConfig()
+    height_map: HeightMapConfig = HeightMapConfig()
+    randomization: RandomizationConfig = RandomizationConfig()
+    decimation: int = 4  # physics steps per policy step (0.005 s x 4 -> 50 Hz)
+    episode_length_s: float = 10.0
+    action_clip: float = 5.0  # |action| clip before scaling
+    max_tilt: float = 1.0  # rad; tilting further ends the episode
+    min_base_height: float = 0.12  # m above the terrain under the base; lower ends the episode
+    terminate_on_trunk_contact: bool = True  # training only; off in evaluation
+    spawn_height: float = 0.36  # base height above the spawn floor at reset (m)
+    spawn_margin: float = 0.15  # m taken off each side of a tile's spawn rectangle: a Go2 turned
+    # 45 deg reaches ~0.45 m from its centre, more than the terrain's 0.35 m wall clearance
+    joint_noise_at_reset: float = 0.1  # rad, uniform +- around the nominal pose (0 in evaluation)
+    success_distance: float = 0.5  # planar m
+    success_speed: float = 0.3  # m/s
+    success_hold_s: float = 0.5  # s the success condition must hold
+    # What the goal observation points at. "final": the tile's goal (the paper's). "waypoint":
+    # a point `waypoint_lookahead_m` further along the stair's centre-line than the robot's own
+    # projection on it, with the centre-line's heading there; the final goal (and its yaw) once
+    # the goal is closer along the line than the lookahead. Ours, not the paper's: a building's
+    # stair centre-line is known from its map, and a goal behind the wall of a U-turn otherwise
+    # pulls a stage-1 policy straight into the wall. Rewards, success and the curriculum always
+    # use the final goal.
+    goal_mode: Literal["final", "waypoint"] = "final"
+    waypoint_lookahead_m: float = 1.0
+
+
+def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) -> EnvConfig:
+    """The same env for evaluation: no noise, no randomisation, no trunk ending, no curriculum."""
+    return dataclasses.replace(
+        config,
+        noise=dataclasses.replace(config.noise, enabled=False),
+        randomization=dataclasses.replace(config.randomization, enabled=False),
+        curriculum=dataclasses.replace(config.curriculum, enabled=False),
+        terminate_on_trunk_contact=False,
+        joint_noise_at_reset=0.0,
+        episode_length_s=episode_length_s or config.episode_length_s,
+    )
+
+
+def env_config_from(saved: dict[str, Any] | None, overrides: Sequence[str] = ()) -> EnvConfig:
+    """The EnvConfig of a saved env table (a policy's, see rl.policy.saved_config; None: the
+    defaults) with ``overrides`` ("robot.physics=reference", ...) applied."""
+    data = apply_overrides(to_dict(EnvConfig()) if saved is None else saved, overrides)
+    return from_dict(EnvConfig, rb.expand_physics_in(data, "robot"), prefix="env")

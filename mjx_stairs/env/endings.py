@@ -1,0 +1,73 @@
+"""How a step ends an episode (success, falls, leaving the atlas, trunk contact, timeout) and
+the metrics every step reports."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+from mjx_stairs.env import rewards as rw
+from mjx_stairs.env.config import EnvConfig
+from mjx_stairs.env.geometry import Kinematics
+
+STEP_METRICS = ("done", "episode_success", "terminated", "truncated", "nan_reset",
+                "trunk_termination", "tilt_termination", "low_termination",
+                "outside_termination", "level", "at_top", "goal_distance", "moved_up")
+"""The metrics of every step besides `reward/<term>` (means over robots in the trainer's log)."""
+
+
+class Endings(NamedTuple):
+    """How the step ended the episode ([] each); `done` = terminated | truncated."""
+
+    success: jnp.ndarray
+    success_count: jnp.ndarray
+    tilted: jnp.ndarray
+    too_low: jnp.ndarray
+    fell: jnp.ndarray
+    outside: jnp.ndarray
+    trunk_hit: jnp.ndarray
+    terminated: jnp.ndarray
+    truncated: jnp.ndarray
+    done: jnp.ndarray
+
+
+def endings(c: EnvConfig, kin: Kinematics, q: rw.Quantities, info: dict, finite: jnp.ndarray,
+            base_clearance: jnp.ndarray, world_size: tuple[float, float], hold_steps: int,
+            episode_steps: int) -> Endings:
+    """Success (close and slow, held for `hold_steps`), terminations and the timeout. A robot
+    whose physics blew up (not `finite`) is terminated."""
+    close = (q.planar_goal_distance < c.success_distance) & (q.planar_speed < c.success_speed)
+    success_count = jnp.where(close, info["success_count"] + 1, 0)
+    success = jnp.maximum(info["success"], (success_count >= hold_steps).astype(jnp.float32))
+    pos = kin.pos
+    tilted = kin.gravity_body[2] > -jnp.cos(c.max_tilt)
+    too_low = base_clearance < c.min_base_height
+    fell = tilted | too_low
+    outside = ((pos[0] < 0) | (pos[1] < 0) | (pos[0] > world_size[0])
+               | (pos[1] > world_size[1]))
+    trunk_hit = jnp.any(q.trunk_contacts) & c.terminate_on_trunk_contact
+    terminated = fell | outside | trunk_hit | ~finite
+    truncated = (info["step"] + 1 >= episode_steps) & ~terminated
+    return Endings(success, success_count, tilted, too_low, fell, outside, trunk_hit,
+                   terminated, truncated, terminated | truncated)
+
+
+def metric_names(reward_terms: tuple[str, ...]) -> tuple[str, ...]:
+    """The keys of `state.metrics`: `reward/<term>` per active term, then STEP_METRICS."""
+    return tuple(f"reward/{k}" for k in reward_terms) + STEP_METRICS
+
+
+def metrics(terms: dict, e: Endings, finite: jnp.ndarray, level: jnp.ndarray, top_level: int,
+            goal_distance: jnp.ndarray, moved_up: jnp.ndarray) -> dict[str, jnp.ndarray]:
+    """{metric: []} of this step, keyed by metric_names (level: before the auto-reset)."""
+    f32 = lambda x: x.astype(jnp.float32)
+    done = f32(e.done)
+    values = (  # in STEP_METRICS order
+        done, e.success * done, f32(e.terminated), f32(e.truncated), f32(~finite),
+        f32(e.trunk_hit & ~e.fell), f32(e.tilted), f32(e.too_low & ~e.tilted),
+        f32(e.outside & ~e.fell), f32(level), f32(level == top_level),
+        goal_distance, f32(moved_up & e.done),
+    )
+    return {**{f"reward/{k}": v for k, v in terms.items()},
+            **dict(zip(STEP_METRICS, values, strict=True))}

@@ -1,0 +1,82 @@
+"""The observation, as one table: the env builds it from this, export writes its sidecar from
+it, tests take their sizes from it.
+
+Both streams have the same layout [vector (N_VEC) | height map (size x size, row-major)];
+``obs["state"]`` (actor) carries uniform noise per term's group, ``obs["privileged_state"]``
+(critic) is the same without noise. Every entry is in the SI unit given (scale 1: the policy's
+normaliser does all scaling).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from mjx_stairs.env.config import HeightMapConfig, NoiseConfig
+
+
+class ObsTerm(NamedTuple):
+    """One named range of the observation vector."""
+
+    name: str
+    size: int
+    unit: str
+    noise: str | None  # the NoiseConfig field of its training noise (None: no noise)
+    scale: float  # multiplies the value (1: SI units)
+    description: str
+
+
+VECTOR = (
+    ObsTerm("base_lin_vel", 3, "m/s", "lin_vel", 1.0,
+            "base linear velocity in the base (body) frame"),
+    ObsTerm("base_ang_vel", 3, "rad/s", "ang_vel", 1.0,
+            "base angular velocity in the base frame (IMU gyro)"),
+    ObsTerm("projected_gravity", 3, "1", "gravity", 1.0,
+            "unit gravity vector (0, 0, -1) in the base frame"),
+    ObsTerm("joint_pos", 12, "rad", "joint_pos", 1.0,
+            "joint positions minus the nominal pose, joint_names order"),
+    ObsTerm("joint_vel", 12, "rad/s", "joint_vel", 1.0, "joint velocities, joint_names order"),
+    ObsTerm("last_action", 12, "1", None, 1.0,
+            "the previous policy action, clipped to +-action_clip"),
+    ObsTerm("goal", 4, "m, m, m, rad", None, 1.0,
+            "goal position minus base position in the base frame (x, y, z), then the yaw error "
+            "goal_yaw - base_yaw wrapped to [-pi, pi)"),
+)
+"""The vector part, in order."""
+
+N_VEC = sum(t.size for t in VECTOR)
+"""Length of the vector part of an observation (before the height map)."""
+
+
+def height_map_term(hm: HeightMapConfig) -> ObsTerm:
+    return ObsTerm("height_map", hm.size * hm.size, "m", "height", 1.0,
+                   f"{hm.size} x {hm.size} heights, row-major (rows along the base's yaw-frame "
+                   f"y, columns along its x); value = clip(base_z - terrain_z - {hm.offset}, "
+                   f"-{hm.clip}, {hm.clip})")
+
+
+def terms(hm: HeightMapConfig) -> tuple[ObsTerm, ...]:
+    """Every term of an observation, in order."""
+    return (*VECTOR, height_map_term(hm))
+
+
+def size(hm: HeightMapConfig) -> int:
+    """Floats per observation."""
+    return N_VEC + hm.size * hm.size
+
+
+def assemble(values: dict[str, jnp.ndarray], hm: HeightMapConfig, noise: NoiseConfig,
+             rng: jax.Array | None) -> dict[str, jnp.ndarray]:
+    """{"state", "privileged_state"} [size] from {term name: [term size]}; with ``rng`` None or
+    the noise off both are clean."""
+    table = terms(hm)
+    clean = jnp.concatenate([values[t.name] if t.scale == 1.0 else t.scale * values[t.name]
+                             for t in table])
+    if not noise.enabled or rng is None:
+        return {"state": clean, "privileged_state": clean}
+    widths = jnp.concatenate([jnp.full((t.size,), getattr(noise, t.noise) if t.noise else 0.0)
+                              for t in table])
+    noisy = clean + widths * jax.random.uniform(rng, clean.shape, minval=-1.0, maxval=1.0)
+    return {"state": noisy, "privileged_state": clean}
