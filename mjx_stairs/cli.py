@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
+import typing
 from pathlib import Path
+from typing import Any
 
 from mjx_stairs.config import ConfigError
 from mjx_stairs.rl.checkpoint import CheckpointError
+from mjx_stairs.study.specs import EvalSpec
+from mjx_stairs.tools.specs import PlaySpec
 
 
 def _csv_ints(text: str) -> tuple[int, ...]:
@@ -19,6 +24,49 @@ def _csv_ints(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(
             f"expected comma-separated integers, got {text!r}"
         ) from None
+
+
+def add_spec_flags(parser: argparse.ArgumentParser, cls: type, exclude: tuple[str, ...] = (),
+                   **defaults: Any) -> None:
+    """One flag per field of the spec dataclass ``cls`` (all but ``exclude``): the name from
+    the field's ``flag`` metadata or its own name, its type, help and default (``defaults``
+    overrides; a ``one_based`` field is shown 1-based)."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        if f.name in exclude:
+            continue
+        meta, tp = f.metadata, hints[f.name]
+        default = defaults.get(f.name, f.default)
+        flag = meta.get("flag", "--" + f.name.replace("_", "-"))
+        kw: dict[str, Any] = {"dest": f.name, "help": meta.get("help", ""),
+                              "metavar": meta.get("metavar", flag[2:].upper().replace("-", "_"))}
+        if typing.get_origin(tp) is typing.Literal:
+            kw["metavar"] = None
+            kw["choices"] = typing.get_args(tp)
+        elif tp == tuple[int, ...]:
+            kw["type"] = _csv_ints
+        elif tp == tuple[str, ...]:
+            kw["nargs"] = "+"
+        else:
+            kw["type"] = tp
+        if meta.get("one_based"):
+            default = tuple(v + 1 for v in default) if isinstance(default, tuple) else default + 1
+        kw["default"] = list(default) if kw.get("nargs") else default
+        kw["help"] += f" (default {default})" if default not in ((), "") else ""
+        parser.add_argument(flag, **kw)
+
+
+def spec_from(cls: type, args: argparse.Namespace, **extra: Any) -> Any:
+    """The spec dataclass of the parsed flags (add_spec_flags) and ``extra`` fields."""
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name in extra or not hasattr(args, f.name):
+            continue
+        v = getattr(args, f.name)
+        if f.metadata.get("one_based"):
+            v = tuple(x - 1 for x in v) if isinstance(v, tuple) else v - 1
+        kwargs[f.name] = tuple(v) if isinstance(v, list) else v
+    return cls(**kwargs, **extra)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -42,15 +90,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_exp1_report(args: argparse.Namespace) -> int:
-    from mjx_stairs.study import evaluate, exp1
+    from mjx_stairs.study import exp1
 
-    spec = evaluate.EvalSpec(
-        robots_per_level=args.robots,
-        episode_length_s=args.episode_s,
-        seed=args.seed,
-        resolution=args.resolution,
-    )
-    exp1.report(args.stage2, args.out, args.ablation, spec)
+    exp1.report(args.stage2, args.out, args.ablation, spec_from(EvalSpec, args))
     return 0
 
 
@@ -74,16 +116,9 @@ def cmd_exp1(args: argparse.Namespace) -> int:
 
 
 def cmd_transfer(args: argparse.Namespace) -> int:
-    from mjx_stairs.study import evaluate, transfer
+    from mjx_stairs.study import transfer
 
-    spec = evaluate.EvalSpec(
-        levels=tuple(lv - 1 for lv in args.levels),
-        robots_per_level=args.robots,
-        episode_length_s=args.episode_s,
-        seed=args.seed,
-        resolution=args.resolution,
-        env_overrides=tuple(args.env),
-    )
+    spec = spec_from(EvalSpec, args)
     if args.config is None:  # the whole experiment: train what is missing, then the matrix
         transfer.run_pipeline(spec, force=args.force)
         return 0
@@ -95,16 +130,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     from mjx_stairs.study import evaluate
 
-    spec = evaluate.EvalSpec(
-        schedule=args.schedule,
-        levels=tuple(lv - 1 for lv in args.levels),
-        robots_per_level=args.robots,
-        episode_length_s=args.episode_s,
-        seed=args.seed,
-        resolution=args.resolution,
-        env_overrides=tuple(args.env),
-    )
-    evaluate.evaluate(args.checkpoint, args.family, spec, args.out)
+    evaluate.evaluate(args.checkpoint, args.families, spec_from(EvalSpec, args), args.out)
     return 0
 
 
@@ -149,20 +175,10 @@ def cmd_terrain(args: argparse.Namespace) -> int:
 def cmd_play(args: argparse.Namespace) -> int:
     from mjx_stairs.tools import play
 
-    spec = play.PlaySpec(
-        family=args.family,
-        level=args.level - 1,
-        schedule=args.schedule,
-        robots=args.robots,
-        seconds=args.seconds,
-        seed=args.seed,
-        episode_length_s=args.episode_s,
-        resolution=args.resolution,
-    )
     try:
         play.play(
             args.checkpoint,
-            spec,
+            spec_from(PlaySpec, args),
             video=args.video,
             mcap=args.mcap,
             width=args.width,
@@ -221,21 +237,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     e = sub.add_parser("eval", help="success rate per (checkpoint, family, level)")
     e.add_argument("--checkpoint", nargs="+", required=True, help="policy.npz file(s)")
-    e.add_argument("--family", nargs="+", default=["u_shaped"])
-    e.add_argument("--levels", type=_csv_ints, default=(), help="1-based, e.g. 1,2,3 (default all)")
-    e.add_argument("--robots", type=int, default=1000, help="robots per level")
-    e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--schedule", default="test", help="train | test | extended")
-    e.add_argument("--episode-s", type=float, default=20.0, help="evaluation episode length (s)")
-    e.add_argument("--resolution", type=float, default=0.025)
-    e.add_argument(
-        "--env",
-        nargs="+",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override the policy's env config, keys under [env], e.g. "
-        "robot.shin_collision=true (evaluate in other physics than trained with)",
-    )
+    e.add_argument("--family", nargs="+", dest="families", default=["u_shaped"],
+                   help="stair families")
+    add_spec_flags(e, EvalSpec, exclude=("family",))
     e.add_argument("--out", default=None, help="directory for results.json and results.md")
     e.set_defaults(fn=cmd_eval)
 
@@ -263,10 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument(
         "--ablation", default=None, help="stage-2 policy trained without the stall penalty"
     )
-    x.add_argument("--robots", type=int, default=1000, help="robots per level")
-    x.add_argument("--episode-s", type=float, default=20.0)
-    x.add_argument("--seed", type=int, default=0)
-    x.add_argument("--resolution", type=float, default=0.025)
+    add_spec_flags(x, EvalSpec, exclude=("family", "schedule", "levels", "env_overrides"))
     x.add_argument("--out", required=True, help="output directory")
     x.set_defaults(fn=cmd_exp1_report)
 
@@ -291,16 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
         "without it, train the missing models first",
     )
     m.add_argument("--force", action="store_true", help="retrain models already published")
-    m.add_argument("--levels", type=_csv_ints, default=(3, 4), help="1-based test levels")
-    m.add_argument("--robots", type=int, default=1000)
-    m.add_argument("--episode-s", type=float, default=20.0)
-    m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--resolution", type=float, default=0.025)
-    m.add_argument(
-        "--env", nargs="+", default=[], metavar="KEY=VALUE",
-        help="override every model's env config, keys under [env], e.g. "
-        "robot.terrain_contacts=mjx (evaluate all models in one physics)",
-    )
+    add_spec_flags(m, EvalSpec, exclude=("family", "schedule"), levels=(2, 3))
     m.add_argument("--out", default="experiments/results/transfer")
     m.set_defaults(fn=cmd_transfer)
 
@@ -310,14 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     pl = sub.add_parser("play", help="roll out a policy: mp4 video and/or MCAP for Foxglove")
     pl.add_argument("--checkpoint", required=True, help="policy.npz")
-    pl.add_argument("--family", default="u_shaped")
-    pl.add_argument("--level", type=int, default=1, help="1-based level of the schedule")
-    pl.add_argument("--schedule", default="test", help="train | test | extended")
-    pl.add_argument("--robots", type=int, default=4)
-    pl.add_argument("--seconds", type=float, default=10.0, help="rollout length (s)")
-    pl.add_argument("--seed", type=int, default=0)
-    pl.add_argument("--episode-s", type=float, default=20.0, help="episode length (auto-reset)")
-    pl.add_argument("--resolution", type=float, default=0.025, help="terrain grid (m)")
+    add_spec_flags(pl, PlaySpec)
     pl.add_argument("--video", default=None, help="mp4 path (robot 0, tracking camera)")
     pl.add_argument("--mcap", default=None, help="MCAP path (all robots)")
     pl.add_argument("--width", type=int, default=640)

@@ -10,7 +10,7 @@ Override values are parsed as TOML literals (``1e-3``, ``true``, ``[8, 16]``, ``
 value that is not valid TOML is taken as a bare string (``train.experiment=stage1``). ``none``
 sets an optional field to None. An unknown key or a value of the wrong type raises ConfigError
 naming the full key path and the expected type. Field docs live in
-``field(metadata={"help": ...})``; ``describe(cls)`` lists them.
+``field(metadata={"help": ...})``.
 """
 
 from __future__ import annotations
@@ -212,16 +212,28 @@ def apply_overrides(data: dict[str, Any], overrides: Iterable[str]) -> dict[str,
     return data
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """The table of a TOML file; a missing or malformed file is a one-line ConfigError."""
+def read_toml(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """The table of a TOML file; a missing or malformed file is a one-line ConfigError.
+
+    A top-level ``base = "other.toml"`` (relative to the file) inherits: the file's tables are
+    deep-merged over the base's (recursively: a base may have a base of its own)."""
     path = Path(path)
     try:
         with path.open("rb") as f:
-            return tomllib.load(f)
+            data = tomllib.load(f)
     except FileNotFoundError:
         raise ConfigError(f"{path}: config file not found") from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: invalid TOML: {e}") from None
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"{path}: base: expected a file name, got {base!r}")
+    base_path = (path.parent / base).resolve()
+    if base_path in _seen or base_path == path.resolve():
+        raise ConfigError(f"{path}: base: '{base}' inherits from itself")
+    return _merge(read_toml(base_path, (*_seen, path.resolve())), data)
 
 
 def load_config(
@@ -238,17 +250,3 @@ def load_config(
     except ConfigError as e:
         where = f"{path}: " if path is not None else ""
         raise ConfigError(f"{where}{e}") from None
-
-
-def describe(cls: type, prefix: str = "") -> list[tuple[str, str, Any, str]]:
-    """(key, type, default, help) for every leaf field, for --help output."""
-    rows = []
-    hints = _hints(cls)
-    for f in dataclasses.fields(cls):
-        key = f"{prefix}.{f.name}" if prefix else f.name
-        tp = hints[f.name]
-        if dataclasses.is_dataclass(tp):
-            rows.extend(describe(tp, key))
-            continue
-        rows.append((key, _type_name(tp), _default(f), f.metadata.get("help", "")))
-    return rows

@@ -181,8 +181,3 @@ def export_mesh(heights: np.ndarray, resolution: float, path: str | os.PathLike,
 def export_tile(tile: Tile, path: str | os.PathLike) -> trimesh.Trimesh:
     """Write ``tile`` as a mesh (tile frame) to ``path`` (.glb/.obj/.stl/.ply)."""
     return export_mesh(tile.heights, tile.resolution, path)
-
-
-def export_atlas(atlas, path: str | os.PathLike) -> trimesh.Trimesh:
-    """Write a whole Atlas (world frame) as one mesh."""
-    return export_mesh(atlas.heights, atlas.resolution, path)

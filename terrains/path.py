@@ -73,11 +73,3 @@ def resample(path: list[Segment], k: int) -> np.ndarray:
     out = np.concatenate(pts, 0)
     assert out.shape == (k, 2), out.shape
     return out
-
-
-def pad_polyline(points: np.ndarray, k: int) -> np.ndarray:
-    """[m, d] points -> [k, d]: the first k if m >= k, else padded by repeating the last point."""
-    points = np.asarray(points)
-    if len(points) >= k:
-        return points[:k]
-    return np.concatenate([points, np.repeat(points[-1:], k - len(points), 0)], 0)

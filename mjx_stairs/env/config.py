@@ -99,5 +99,7 @@ def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) 
 def env_config_from(saved: dict[str, Any] | None, overrides: Sequence[str] = ()) -> EnvConfig:
     """The EnvConfig of a saved env table (a policy's, see rl.policy.saved_config; None: the
     defaults) with ``overrides`` ("robot.physics=reference", ...) applied."""
-    data = apply_overrides(to_dict(EnvConfig()) if saved is None else saved, overrides)
-    return from_dict(EnvConfig, rb.expand_physics_in(data, "robot"), prefix="env")
+    data = to_dict(EnvConfig()) if saved is None else saved
+    for item in overrides:  # in order: a physics preset sets the fields it names
+        data = rb.expand_physics_in(apply_overrides(data, [item]), "robot")
+    return from_dict(EnvConfig, data, prefix="env")

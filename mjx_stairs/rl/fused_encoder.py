@@ -3,7 +3,7 @@
 Same function as the per-layer paths in ``networks`` (3x3 SAME conv -> ELU -> 2x2 max-pool for
 every layer but the last, conv -> ELU for the last), computed with fewer passes over memory:
 
-- Each conv is one row-Toeplitz matmul (``toeplitz``, which ``networks._conv3x3_row`` uses too):
+- Each conv is one row-Toeplitz matmul (``toeplitz``):
   the three neighbouring input rows side by side, [N, rows, 3 W Cin], times a [3 W Cin, cols]
   matrix built from the kernel. A pooled layer computes only the rows and columns its floor
   pooling keeps, and orders the output columns by column parity, (parity, col // 2, cout), so that

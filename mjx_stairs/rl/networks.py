@@ -31,7 +31,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
@@ -61,26 +61,20 @@ class NetworkConfig:
         default=(128, 128, 64), metadata={"help": "critic MLP hidden sizes"}
     )
     init_std: float = field(default=0.8, metadata={"help": "initial policy std (all actions)"})
-    init: str = field(
-        default="orthogonal",
-        metadata={"help": "weight init: 'orthogonal' (gain sqrt2, 0.01 actor out, 1 critic out) "
-                  "or 'lecun' (scaled normal)"},
-    )
     normalize_obs: bool = field(
         default=True, metadata={"help": "running mean/std normalisation of both obs streams"}
     )
     obs_clip: float = field(
         default=10.0, metadata={"help": "clip normalised observations to +-obs_clip (0 = off)"}
     )
-    conv_impl: str = field(
+    conv_impl: Literal["auto", "xla", "fused", "fused_bf16"] = field(
         default="auto",
-        metadata={"help": "how the 3x3 convs are computed, not what: 'xla' (lax.conv), 'row' "
-                  "(row-Toeplitz matmuls, faster on GPUs for these tiny maps: 6.8 vs 10.7 ms "
-                  "fwd+bwd on an H100), 'fused' (the conv stack as one function with a "
-                  "written-out backward pass: 4.65 ms) or 'auto' (fused on a GPU, xla "
-                  "elsewhere); 'row_bf16' rounds the conv operands to bfloat16 and 'fused_bf16' "
-                  "stores the fused stack's activations in bfloat16 (3.04 ms; float32 "
-                  "accumulation; not the same function; a loaded policy runs in float32)"},
+        metadata={"help": "how the 3x3 convs are computed, not what: 'xla' (lax.conv), 'fused' "
+                  "(the conv stack as one function with a written-out backward pass: 4.65 vs "
+                  "10.7 ms fwd+bwd on an H100) or 'auto' (fused on a GPU, xla elsewhere); "
+                  "'fused_bf16' stores the fused stack's activations in bfloat16 (3.04 ms; "
+                  "float32 accumulation; not the same function; a loaded policy runs in "
+                  "float32)"},
     )
 
 
@@ -119,31 +113,24 @@ def _gram_schmidt(a: jax.Array, m: jax.Array) -> jax.Array:
     return jax.lax.fori_loop(0, a.shape[1], body, jnp.zeros_like(a))
 
 
-def _init_weights(rng: jax.Array, specs: list[tuple[int, int, float]], kind: str) -> list:
-    """Weights [n_in, n_out] * gain for each (n_in, n_out, gain).
+def _init_weights(rng: jax.Array, specs: list[tuple[int, int, float]]) -> list:
+    """Orthogonal weights [n_in, n_out] * gain for each (n_in, n_out, gain).
 
     One Gaussian draw and one (vmapped) Gram-Schmidt loop for all layers: every separate
-    jax.random call or loop costs its own compile on the CPU. Orthogonal init orthonormalises
-    the shorter side (same Haar distribution as QR with the sign fix); 'lecun' scales the
-    Gaussian by 1/sqrt(n_in).
+    jax.random call or loop costs its own compile on the CPU. Orthonormalises the shorter side
+    (same Haar distribution as QR with the sign fix).
     """
-    if kind not in ("orthogonal", "lecun"):
-        raise ValueError(f"network.init: unknown init '{kind}' (expected 'orthogonal' or 'lecun')")
     big = max(max(a, b) for a, b, _ in specs)
     small = max(min(a, b) for a, b, _ in specs)
     noise = jax.random.normal(rng, (len(specs), big, small), jnp.float32)
-    if kind == "orthogonal":
-        ms = jnp.array([min(a, b) for a, b, _ in specs])
-        rows = jnp.arange(big)[None, :, None]
-        ns = jnp.array([max(a, b) for a, b, _ in specs])[:, None, None]
-        q = jax.vmap(_gram_schmidt)(jnp.where(rows < ns, noise, 0.0), ms)
+    ms = jnp.array([min(a, b) for a, b, _ in specs])
+    rows = jnp.arange(big)[None, :, None]
+    ns = jnp.array([max(a, b) for a, b, _ in specs])[:, None, None]
+    q = jax.vmap(_gram_schmidt)(jnp.where(rows < ns, noise, 0.0), ms)
     out = []
     for i, (n_in, n_out, gain) in enumerate(specs):
         n, m = max(n_in, n_out), min(n_in, n_out)
-        if kind == "orthogonal":
-            w = q[i, :n, :m] if n_in >= n_out else q[i, :n, :m].T
-        else:
-            w = noise[i, :n, :m].reshape(n_in, n_out) / math.sqrt(n_in)
+        w = q[i, :n, :m] if n_in >= n_out else q[i, :n, :m].T
         out.append(gain * w)
     return out
 
@@ -191,7 +178,7 @@ def init_params(
         mlps[name] = len(specs)
         specs += [(a, b, out_gain if i == len(sizes) - 2 else relu_gain)
                   for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True))]
-    ws = _init_weights(rng, specs, cfg.init)
+    ws = _init_weights(rng, specs)
 
     def dense(i):
         return {"w": ws[i], "b": jnp.zeros((specs[i][1],), jnp.float32)}
@@ -222,24 +209,6 @@ def _conv3x3(x: jax.Array, p: Params) -> jax.Array:
     return y + p["b"]
 
 
-def _conv3x3_row(x: jax.Array, p: Params, operand_dtype: Any = jnp.float32) -> jax.Array:
-    """``_conv3x3`` as one batched matmul (row-Toeplitz): [N, H, W, Cin] -> [N, H, W, Cout].
-
-    Rows h-1, h, h+1 (zero rows past the edges) are concatenated into [N, H, 3 W Cin] and
-    multiplied by ``fused_encoder.toeplitz``, which holds the width shifts and their zero
-    padding (rows (ky, col, cin), columns (col, cout)). For
-    these tiny maps a dense matmul beats cuDNN's launch- and layout-bound small convs.
-    ``operand_dtype`` bfloat16 rounds both matmul operands (float32 accumulation, the tensor
-    cores' fast path): NOT the same function then."""
-    n, h, w, c_in = x.shape
-    c_out = p["w"].shape[-1]
-    xp = jnp.pad(x.reshape(n, h, w * c_in).astype(operand_dtype), ((0, 0), (1, 1), (0, 0)))
-    rows = jnp.concatenate([xp[:, :h], xp[:, 1 : h + 1], xp[:, 2:]], axis=-1)
-    t = fused_encoder.toeplitz(p["w"], w, pooled=False).astype(operand_dtype)
-    y = jnp.matmul(rows, t, preferred_element_type=jnp.float32)
-    return y.reshape(n, h, w, c_out) + p["b"]
-
-
 def _layer_by_layer(conv):
     """A conv stack from a per-layer conv: maps [N, H, W] -> [N, H_L, W_L, C_L], each layer
     conv -> ELU, a 2x2 max-pool after all but the last."""
@@ -258,8 +227,6 @@ def _layer_by_layer(conv):
 # conv_impl -> the conv stack; all compute the same function (the bf16 ones up to rounding)
 CONV_IMPLS = {
     "xla": _layer_by_layer(_conv3x3),
-    "row": _layer_by_layer(_conv3x3_row),
-    "row_bf16": _layer_by_layer(functools.partial(_conv3x3_row, operand_dtype=jnp.bfloat16)),
     "fused": fused_encoder.conv_stack,  # one custom-VJP function for the whole stack
     # the same, storing its activations, stacks and pre-pool gradients in bfloat16
     "fused_bf16": functools.partial(fused_encoder.conv_stack, dtype=jnp.bfloat16),
@@ -267,7 +234,7 @@ CONV_IMPLS = {
 
 
 # conv_impls that round (training-speed settings): a loaded policy is computed in float32
-REDUCED_PRECISION_IMPLS = ("row_bf16", "fused_bf16")
+REDUCED_PRECISION_IMPLS = ("fused_bf16",)
 
 
 def _conv_fn(conv_impl: str):

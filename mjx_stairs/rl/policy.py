@@ -67,15 +67,30 @@ def save_policy(path: str | Path, params: networks.Params,
     checkpoint.save(path, tree, meta)
 
 
+RETIRED_CONV_IMPLS = ("row", "row_bf16")
+"""conv_impls that only old measurements used (the row-Toeplitz encoder, the same function as
+"xla" in float32): a policy trained with one is computed with "auto"."""
+
+
+def _current_network(saved: dict[str, Any]) -> dict[str, Any]:
+    """A saved network table in today's NetworkConfig: retired options mapped to their
+    successors ("init" was always "orthogonal", the only init left)."""
+    out = {k: v for k, v in saved.items() if k != "init"}
+    if out.get("conv_impl") in RETIRED_CONV_IMPLS:
+        out["conv_impl"] = "auto"
+    return out
+
+
 def load_policy(path: str | Path) -> Policy:
     """Read a policy file written by ``save_policy`` (validated against its own metadata).
 
-    A policy trained with a bfloat16 conv_impl is loaded with conv_impl "auto" (float32)."""
+    A policy trained with a bfloat16 or a retired conv_impl is loaded with conv_impl "auto"
+    (float32); its metadata keeps what it was trained with."""
     meta = checkpoint.load_metadata(path)
     if meta.get("kind") != "policy":
         raise checkpoint.CheckpointError(f"{path}: not a policy file (kind={meta.get('kind')})")
     try:
-        net_cfg = from_dict(NetworkConfig, meta["network"])
+        net_cfg = from_dict(NetworkConfig, _current_network(meta["network"]))
         layout = ObsLayout(int(meta["layout"]["n_vec"]), tuple(meta["layout"]["map_shape"]))
         a = int(meta["action_size"])
     except (KeyError, ConfigError, TypeError, ValueError) as e:

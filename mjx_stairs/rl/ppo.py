@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -26,7 +26,7 @@ class PPOConfig:
     """PPO hyperparameters; defaults are the protocol's figures."""
 
     learning_rate: float = field(default=1e-3, metadata={"help": "initial Adam learning rate"})
-    lr_schedule: str = field(
+    lr_schedule: Literal["adaptive", "fixed"] = field(
         default="adaptive", metadata={"help": "'adaptive' (KL-driven, rsl_rl) or 'fixed'"}
     )
     desired_kl: float = field(default=0.01, metadata={"help": "target KL of the adaptive lr"})

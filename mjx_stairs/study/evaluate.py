@@ -25,24 +25,7 @@ from mjx_stairs.env.config import EnvConfig, env_config_from, evaluation_config
 from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config
 from mjx_stairs.study.experiment import TerrainConfig, build_atlas
-
-
-@dataclasses.dataclass(frozen=True)
-class EvalSpec:
-    """What to evaluate one policy on."""
-
-    family: str = "u_shaped"
-    schedule: str = "test"
-    levels: tuple[int, ...] = ()  # 0-based; () = all levels of the schedule
-    robots_per_level: int = 1000
-    episode_length_s: float = 20.0
-    seed: int = 0
-    resolution: float = 0.025
-    tile_size: float = 10.0
-    # "key=value" overrides of the policy's env config, keys relative to [env], e.g.
-    # "robot.physics=reference": evaluate a policy trained with cheaper physics settings in the
-    # reference physics
-    env_overrides: tuple[str, ...] = ()
+from mjx_stairs.study.specs import EvalSpec
 
 
 def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> EnvConfig:

@@ -1,5 +1,8 @@
 """An experiment = terrain + env + learner settings, loaded from experiments/*.toml.
 
+A TOML file may inherit from another (``base = "stage2_u.toml"``: its tables are merged over the
+base's) and name a physics preset (``[env.robot] physics = "lean"``, sim.robot.PHYSICS).
+
 A TOML file may carry a `[cpu]` table of overrides (dotted keys, as on the command line) that is
 applied when JAX runs on the CPU, so `make train-stage1` on a laptop runs a small preset that
 finishes in minutes instead of the 4096-robot GPU run.
@@ -10,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Literal
 
 import jax
 
@@ -21,6 +24,7 @@ from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.rl.networks import NetworkConfig
 from mjx_stairs.rl.ppo import PPOConfig
 from mjx_stairs.rl.trainer import TrainConfig
+from mjx_stairs.sim.robot import expand_physics_in
 
 
 @dataclass(frozen=True)
@@ -28,7 +32,8 @@ class TerrainConfig:
     """Which tiles the atlas holds."""
 
     families: tuple[str, ...] = field(default=("pyramid",), metadata={"help": "stair families"})
-    schedule: str = field(default="train", metadata={"help": "train | test | extended"})
+    schedule: Literal["train", "test", "extended"] = field(
+        default="train", metadata={"help": "the level table: train | test | extended"})
     levels: tuple[int, ...] = field(default=(), metadata={"help": "0-based levels; () = all"})
     variants_per_family: int = field(default=4, metadata={"help": "atlas columns per family"})
     resolution: float = field(default=0.025, metadata={"help": "grid spacing (m)"})
@@ -45,7 +50,7 @@ class ExperimentConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     network: NetworkConfig = field(default_factory=NetworkConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
-    reward_preset: str = field(
+    reward_preset: Literal["", "stage1", "stage2"] = field(
         default="", metadata={"help": "stage1 | stage2: start env.rewards from this preset"}
     )
     init_from: str = field(
@@ -73,7 +78,8 @@ def load(path: str | Path | None, overrides: Iterable[str] = (), cpu: bool | Non
     overrides = list(overrides)
     if cpu and cpu_table:
         overrides = [f"{k}={_toml_literal(v)}" for k, v in _flatten(cpu_table)] + overrides
-    data = apply_overrides(data, overrides)
+    for item in ("", *overrides):  # in order: a physics preset sets the fields it names
+        data = _with_physics(apply_overrides(data, [item] if item else []))
     preset = data.get("reward_preset", "")
     if preset:
         if preset not in PRESETS:
@@ -88,6 +94,13 @@ def load(path: str | Path | None, overrides: Iterable[str] = (), cpu: bool | Non
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}" if path else str(e)) from None
     return config, bool(cpu and cpu_table)
+
+
+def _with_physics(data: dict[str, Any]) -> dict[str, Any]:
+    """``env.robot.physics = "reference" | "lean"`` replaced by the settings it names."""
+    if isinstance(data.get("env"), dict):
+        data = {**data, "env": expand_physics_in(data["env"], "robot")}
+    return data
 
 
 def build_atlas(terrain: TerrainConfig):

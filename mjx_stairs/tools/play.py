@@ -43,26 +43,11 @@ from mjx_stairs.env.config import env_config_from, evaluation_config  # noqa: E4
 from mjx_stairs.env.stair_env import StairEnv  # noqa: E402
 from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config  # noqa: E402
 from mjx_stairs.study.experiment import TerrainConfig, build_atlas  # noqa: E402
+from mjx_stairs.tools.specs import PlaySpec  # noqa: E402
 
 
 class RenderError(RuntimeError):
     """No OpenGL context could be opened, or the video could not be written."""
-
-
-@dataclasses.dataclass(frozen=True)
-class PlaySpec:
-    """What to roll out."""
-
-    family: str = "u_shaped"
-    level: int = 0  # 0-based level of the schedule
-    schedule: str = "test"
-    robots: int = 4
-    seconds: float = 10.0
-    seed: int = 0
-    episode_length_s: float = 20.0  # evaluation episode length (auto-reset after it)
-    resolution: float = 0.025
-    tile_size: float = 10.0
-    border: float = 2.0
 
 
 @dataclasses.dataclass

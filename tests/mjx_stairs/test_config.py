@@ -12,15 +12,15 @@ import pytest
 from mjx_stairs.config import (
     ConfigError,
     apply_overrides,
-    describe,
     from_dict,
     from_json,
     load_config,
     parse_value,
+    read_toml,
     to_dict,
     to_json,
 )
-from mjx_stairs.rl.runner import LearnerConfig
+from mjx_stairs.rl.trainer import LearnerConfig
 
 
 @dataclass(frozen=True)
@@ -108,9 +108,9 @@ def test_file_errors_name_the_file(tmp_path):
 
 def test_json_round_trip_of_the_learner_config():
     cfg = load_config(LearnerConfig, None, ["ppo.learning_rate=3e-4", "network.actor_hidden=[64]",
-                                            "train.experiment=rt", "network.conv_impl=row"])
+                                            "train.experiment=rt", "network.conv_impl=fused"])
     d = to_dict(cfg)
-    assert d["network"]["actor_hidden"] == [64] and d["network"]["conv_impl"] == "row"
+    assert d["network"]["actor_hidden"] == [64] and d["network"]["conv_impl"] == "fused"
     json.dumps(d)
     assert from_json(LearnerConfig, to_json(cfg)) == cfg
     assert from_dict(LearnerConfig, json.loads(json.dumps(d))) == cfg
@@ -125,12 +125,6 @@ def test_learner_defaults_are_the_protocol():
     assert (p.entropy_coef, p.max_grad_norm, p.value_loss_coef) == (0.005, 1.0, 1.0)
     assert n.conv_channels == (8, 16, 32) and n.latent_size == 128 and n.pool_size == 2
     assert n.actor_hidden == n.critic_hidden == (128, 128, 64) and n.init_std == 0.8
-
-
-def test_describe_lists_every_leaf_with_help():
-    rows = {r[0]: r for r in describe(LearnerConfig)}
-    assert rows["ppo.learning_rate"][2] == 1e-3
-    assert all(r[3] for r in rows.values()), [k for k, r in rows.items() if not r[3]]
 
 
 EXPERIMENT_FILES = sorted(
@@ -156,3 +150,30 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
     bf16 = path.name == "stage2_u_lean.toml"
     assert cfg.network.conv_impl == ("fused_bf16" if bf16 else "auto")
     assert experiment.load(path, [], cpu=True)[0].network.conv_impl == "auto"
+
+
+def test_a_file_inherits_from_its_base(tmp_path):
+    (tmp_path / "a.toml").write_text('x = 1\n[inner]\nrate = 0.5\nname = "a"\n')
+    (tmp_path / "b.toml").write_text('base = "a.toml"\n[inner]\nname = "b"\n')
+    assert read_toml(tmp_path / "b.toml") == {"x": 1, "inner": {"rate": 0.5, "name": "b"}}
+    (tmp_path / "c.toml").write_text('base = "c.toml"\n')
+    with pytest.raises(ConfigError, match="inherits from itself"):
+        read_toml(tmp_path / "c.toml")
+
+
+def test_physics_presets_set_the_physics_fields_in_order():
+    from mjx_stairs.sim.robot import PHYSICS
+    from mjx_stairs.study import experiment
+
+    lean, _ = experiment.load("experiments/stage2_u_lean.toml", [], cpu=False)
+    robot = lean.env.robot
+    assert {k: getattr(robot, k) for k in PHYSICS["lean"]} == PHYSICS["lean"]
+    ref, _ = experiment.load("experiments/stage2_u_lean.toml", ["env.robot.physics=reference"],
+                             cpu=False)
+    assert {k: getattr(ref.env.robot, k) for k in PHYSICS["reference"]} == PHYSICS["reference"]
+    later, _ = experiment.load("experiments/stage2_u_lean.toml",
+                               ["env.robot.physics=reference", "env.robot.ls_iterations=4"],
+                               cpu=False)
+    assert later.env.robot.ls_iterations == 4 and later.env.robot.shin_collision
+    with pytest.raises(ConfigError, match="'robot.physics': expected one of"):
+        experiment.load("experiments/stage2_u.toml", ["env.robot.physics=fast"], cpu=False)

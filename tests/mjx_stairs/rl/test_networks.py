@@ -178,37 +178,23 @@ def _encoder_grads(cfg, n_vec, map_shape, n_obs, init_seed, data_seed, bump=None
     return p, jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
 
 
-@pytest.mark.parametrize("impl", ["row", "fused"])
 @pytest.mark.parametrize("n_vec,map_shape,flat", [(N_VEC, (21, 21), False), (3, (7, 9), False),
                                                   (N_VEC, (21, 21), True), (2, (10, 8), False)])
-def test_row_conv_encoder_equals_xla_encoder(n_vec, map_shape, flat, impl):
-    """conv_impl='row' (row-Toeplitz matmuls) and 'fused' (the conv stack with its written-out
-    backward pass) are the same function as lax.conv: features and their gradients wrt every
+def test_fused_conv_encoder_equals_xla_encoder(n_vec, map_shape, flat):
+    """conv_impl='fused' (the conv stack with its written-out backward pass) is the same
+    function as lax.conv: features and their gradients wrt every
     encoder param agree. Flat maps (one bump) make the max-pool windows tie: the gradient is
     split between the tied positions as jax's max gradient does."""
     cfg = NetworkConfig(conv_channels=(4, 6, 8), latent_size=16, actor_hidden=(8,),
                         critic_hidden=(8,))
     p, grad = _encoder_grads(cfg, n_vec, map_shape, 5, 5, 6, bump=30 if flat else None)
-    (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, impl)
+    (ga, fa), (gb, fb) = grad(p, "xla"), grad(p, "fused")
     np.testing.assert_allclose(fb, fa, rtol=1e-5, atol=1e-5)
     assert float(jnp.abs(fa[:, :16]).max()) > 0.0
     for a, b in zip(jax.tree_util.tree_leaves(ga["encoder"]),
                     jax.tree_util.tree_leaves(gb["encoder"]), strict=True):
         assert float(jnp.abs(a).max()) > 0.0
         np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-5)
-
-
-def test_row_bf16_encoder_is_close_to_float32():
-    """conv_impl='row_bf16' rounds the conv operands to bfloat16: close to, not equal to, xla."""
-    layout = ObsLayout(3, (21, 21))
-    cfg = NetworkConfig(latent_size=16, actor_hidden=(8,), critic_hidden=(8,))
-    p = _init(jax.random.PRNGKey(7), cfg, 3, (21, 21), 2)
-    obs = jax.random.normal(jax.random.PRNGKey(8), (6, layout.obs_size))
-    fa = networks.encode(p, obs, layout, conv_impl="xla")
-    fb = networks.encode(p, obs, layout, conv_impl="row_bf16")
-    assert fb.dtype == jnp.float32
-    err = float(jnp.abs(fb - fa).max() / jnp.abs(fa).max())
-    assert 0.0 < err < 3e-2, err
 
 
 @pytest.mark.parametrize("flat", [False, True])
@@ -241,7 +227,7 @@ def test_auto_conv_impl_picks_by_backend():
 
 
 def test_unknown_conv_impl_is_a_one_line_error():
-    with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'.*'xla'.*'row'.*'auto'"):
+    with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'.*'xla'.*'fused'.*'auto'"):
         networks.encode({}, jnp.zeros((2, 3)), ObsLayout(3), conv_impl="cudnn")
     with pytest.raises(ValueError, match=r"network\.conv_impl.*'cudnn'"):
         networks.init_params(jax.random.PRNGKey(0), NetworkConfig(conv_impl="cudnn"), 3, (), 2)

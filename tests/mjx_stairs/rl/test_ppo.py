@@ -170,14 +170,13 @@ def test_update_runs_epochs_and_adapts_lr(setup):
                    dataclasses.replace(cfg, num_minibatches=5), NET, LAYOUT)
 
 
-@pytest.mark.parametrize("impl", ["row", "fused"])
-def test_network_conv_impl_reaches_the_encoder(setup, impl):
-    """net_cfg.conv_impl ('row', 'fused') is threaded through the PPO loss: the same loss and
+def test_network_conv_impl_reaches_the_encoder(setup):
+    """net_cfg.conv_impl ('fused') is threaded through the PPO loss: the same loss and
     gradients as lax.conv, the fused encoder's written-out backward pass included."""
     params, norm = setup
     cfg = PPOConfig()
     batch = _batch(params, norm, value_shift=0.3)
-    row = dataclasses.replace(NET, conv_impl=impl)
+    row = dataclasses.replace(NET, conv_impl="fused")
     grad = jax.jit(jax.grad(ppo.ppo_loss, has_aux=True), static_argnums=(4, 5, 6))
     ga, aux_a = grad(params, norm, batch, params["log_std"], cfg, NET, LAYOUT)
     gb, aux_b = grad(params, norm, batch, params["log_std"], cfg, row, LAYOUT)

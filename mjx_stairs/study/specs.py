@@ -1,0 +1,32 @@
+"""What an evaluation runs on: a plain dataclass (no JAX), so the CLI builds its flags from it
+without importing the simulator."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import field
+from typing import Literal
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalSpec:
+    """What to evaluate one policy on. The `flag` metadata names the command-line flag (cli.py
+    generates the eval, transfer-matrix and exp1-report flags from these fields)."""
+
+    family: str = field(default="u_shaped", metadata={"help": "stair family"})
+    schedule: Literal["train", "test", "extended"] = field(
+        default="test", metadata={"help": "the level table"})
+    levels: tuple[int, ...] = field(
+        default=(), metadata={"help": "levels, e.g. 1,2,3 (default all)", "one_based": True})
+    robots_per_level: int = field(
+        default=1000, metadata={"help": "robots per level", "flag": "--robots"})
+    episode_length_s: float = field(
+        default=20.0, metadata={"help": "evaluation episode length (s)", "flag": "--episode-s"})
+    seed: int = field(default=0, metadata={"help": "seed of the robots' resets"})
+    resolution: float = field(default=0.025, metadata={"help": "terrain grid (m)"})
+    tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
+    env_overrides: tuple[str, ...] = field(
+        default=(),
+        metadata={"flag": "--env", "metavar": "KEY=VALUE",
+                  "help": "override the policy's env config, keys under [env], e.g. "
+                  "robot.physics=reference (evaluate in other physics than trained with)"})
