@@ -219,6 +219,13 @@ def cmd_export(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="mjx-stairs", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
+    _add_train_and_eval(sub)
+    _add_studies(sub)
+    _add_tools(sub)
+    return p
+
+
+def _add_train_and_eval(sub) -> None:
 
     t = sub.add_parser("train", help="train from an experiment TOML")
     t.add_argument("config", help="experiments/*.toml")
@@ -262,6 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default=None, help="JSON path")
     b.set_defaults(fn=cmd_bench)
 
+
+def _add_studies(sub) -> None:
     x = sub.add_parser("exp1-report", help="the paper's EXP1: Fig. 2, stall ablation, Fig. 4")
     x.add_argument("--stage2", required=True, help="stage-2 policy.npz")
     x.add_argument(
@@ -296,6 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--out", default="experiments/results/transfer")
     m.set_defaults(fn=cmd_transfer)
 
+
+def _add_tools(sub) -> None:
     tr = sub.add_parser("terrain", help="the terrains CLI (preview, export, import)")
     tr.add_argument("rest", nargs=argparse.REMAINDER)
     tr.set_defaults(fn=cmd_terrain)
@@ -317,7 +328,6 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-verify", dest="verify", action="store_false", help="skip the onnxruntime vs JAX check"
     )
     ex.set_defaults(fn=cmd_export)
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:

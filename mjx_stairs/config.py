@@ -48,7 +48,10 @@ def _is_optional(tp: Any) -> tuple[bool, Any]:
 
 def _convert(value: Any, tp: Any, key: str) -> Any:
     """Check ``value`` against the annotation ``tp`` and convert it (lists -> tuples, dicts ->
-    dataclasses, int -> float)."""
+    dataclasses, int -> float).
+
+    Long: one branch per supported annotation, read as a table.
+    """
 
     def fail(extra: str = "") -> ConfigError:
         got = f"{type(value).__name__} {value!r}"

@@ -65,7 +65,10 @@ def _side_runs(lo_side: np.ndarray, hi_side: np.ndarray) -> list[tuple[int, int,
 def heights_to_mesh(heights: np.ndarray, resolution: float, origin=(0.0, 0.0),
                     base: float | None = None) -> trimesh.Trimesh:
     """[ny, nx] heights (point (ix, iy) at origin + (ix, iy) * res) -> watertight Trimesh of the
-    solid between ``base`` (default: 0.1 m below the lowest point) and the surface."""
+    solid between ``base`` (default: 0.1 m below the lowest point) and the surface.
+
+    Long: one meshing pass (faces, then walls) that shares its index tables.
+    """
     hq = np.round(np.asarray(heights, np.float64) / HEIGHT_QUANTUM).astype(np.int64)
     ny, nx = hq.shape
     zb = int(hq.min() - round(0.1 / HEIGHT_QUANTUM)) if base is None else int(

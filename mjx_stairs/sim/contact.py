@@ -74,7 +74,10 @@ def _closest_on_triangles(p: jnp.ndarray, a: jnp.ndarray, b: jnp.ndarray, c: jnp
 
 def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     """(dist [NCON], pos [NCON, 3], frame [NCON, 3, 3]) of one sphere against a heightfield, in
-    the world frame; `h` is MJX's HFieldInfo, `s` the sphere's GeomInfo (size[0] = radius)."""
+    the world frame; `h` is MJX's HFieldInfo, `s` the sphere's GeomInfo (size[0] = radius).
+
+    Long: one collision kernel whose geometry reads top to bottom.
+    """
     r = s.size[0]
     p = h.mat.T @ (s.pos - h.pos)  # centre in the heightfield frame
     ncol, nrow = h.ncol, h.nrow

@@ -139,6 +139,8 @@ def build_mj_model(
         flat floor.
       resolution: grid spacing (m).
       config: robot and solver settings.
+
+    Long: one MjSpec edit per setting, in the order MuJoCo needs them.
     """
     spec = mujoco.MjSpec.from_file(str(ASSET))
     spec.option.timestep = config.timestep

@@ -29,6 +29,8 @@ def critic_map(
     height map and the goal. Points on walls are NaN.
     Returns {"x": [nx], "y": [ny], "value": [ny, nx], "heights": tile heights
     [ny_t, nx_t], "extent": (x0, x1, y0, y1), "goal": [4], "centreline": [K, 3]}.
+
+    Long: the grid, its observations, the values and the tile around them, in order.
     """
     spec = EvalSpec(
         family=family,

@@ -63,7 +63,10 @@ def _adaptive_bins(n: int, out: int) -> list[tuple[int, int]]:
 
 
 def build_onnx(policy: Policy, opset: int = OPSET):
-    """The policy's normaliser, encoder and actor as an onnx.ModelProto (checked)."""
+    """The policy's normaliser, encoder and actor as an onnx.ModelProto (checked).
+
+    Long: the graph node by node, in the order networks.encode computes it.
+    """
     onnx, helper, numpy_helper = _onnx()
     from onnx import TensorProto
 
@@ -169,7 +172,10 @@ def build_onnx(policy: Policy, opset: int = OPSET):
 
 
 def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
-    """What a runner needs beside the graph, as a JSON-serialisable dict."""
+    """What a runner needs beside the graph, as a JSON-serialisable dict.
+
+    Long: one JSON document, section by section.
+    """
     cfg = env_config_from(saved_config(policy, "env"))
     layout = policy.layout
     hm = cfg.height_map

@@ -41,193 +41,12 @@ import mujoco
 import numpy as np
 
 from mjx_stairs.atomic import atomic_path
+from mjx_stairs.env import observation
 from mjx_stairs.env.geometry import quat_yaw, yaw_quat
 from mjx_stairs.sim import robot as rb
+from mjx_stairs.tools.mcap_schema import SCHEMAS, reward_schema
 
 NS = 1_000_000_000
-
-# ----------------------------------------------------------------------------- JSON schemas
-# The fields of Foxglove's message schemas (github.com/foxglove/schemas, schemas/jsonschema),
-# composed from small parts.
-
-
-def _obj(title: str, props: dict[str, Any], description: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {"title": title, "type": "object", "properties": props}
-    if description:
-        out["description"] = description
-    return out
-
-
-def _num() -> dict[str, str]:
-    return {"type": "number"}
-
-
-def _time() -> dict[str, Any]:
-    return {
-        "type": "object",
-        "title": "time",
-        "properties": {
-            "sec": {"type": "integer", "minimum": 0},
-            "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
-        },
-    }
-
-
-def _vec3() -> dict[str, Any]:
-    return _obj("foxglove.Vector3", {"x": _num(), "y": _num(), "z": _num()})
-
-
-def _quat() -> dict[str, Any]:
-    return _obj("foxglove.Quaternion", {"x": _num(), "y": _num(), "z": _num(), "w": _num()})
-
-
-def _pose() -> dict[str, Any]:
-    return _obj("foxglove.Pose", {"position": _vec3(), "orientation": _quat()})
-
-
-def _color() -> dict[str, Any]:
-    return _obj("foxglove.Color", {"r": _num(), "g": _num(), "b": _num(), "a": _num()})
-
-
-def _point3() -> dict[str, Any]:
-    return _obj("foxglove.Point3", {"x": _num(), "y": _num(), "z": _num()})
-
-
-def _array(items: dict[str, Any]) -> dict[str, Any]:
-    return {"type": "array", "items": items}
-
-
-def _frame_transform() -> dict[str, Any]:
-    return _obj(
-        "foxglove.FrameTransform",
-        {
-            "timestamp": _time(),
-            "parent_frame_id": {"type": "string"},
-            "child_frame_id": {"type": "string"},
-            "translation": _vec3(),
-            "rotation": _quat(),
-        },
-        "A transform between two reference frames in 3D space",
-    )
-
-
-def _scene_entity() -> dict[str, Any]:
-    shape = lambda title: _obj(title, {"pose": _pose(), "size": _vec3(), "color": _color()})
-    cylinder = _obj(
-        "foxglove.CylinderPrimitive",
-        {"pose": _pose(), "size": _vec3(), "bottom_scale": _num(), "top_scale": _num(),
-         "color": _color()},
-    )
-    triangles = _obj(
-        "foxglove.TriangleListPrimitive",
-        {"pose": _pose(), "points": _array(_point3()), "color": _color(),
-         "colors": _array(_color()), "indices": _array({"type": "integer", "minimum": 0})},
-    )
-    return _obj(
-        "foxglove.SceneEntity",
-        {
-            "timestamp": _time(),
-            "frame_id": {"type": "string"},
-            "id": {"type": "string"},
-            "lifetime": {"type": "object", "title": "duration",
-                         "properties": {"sec": {"type": "integer"},
-                                        "nsec": {"type": "integer", "minimum": 0,
-                                                 "maximum": 999999999}}},
-            "frame_locked": {"type": "boolean"},
-            "metadata": _array(_obj("foxglove.KeyValuePair",
-                                    {"key": {"type": "string"}, "value": {"type": "string"}})),
-            "cubes": _array(shape("foxglove.CubePrimitive")),
-            "spheres": _array(shape("foxglove.SpherePrimitive")),
-            "cylinders": _array(cylinder),
-            "triangles": _array(triangles),
-        },
-        "A visual element in a 3D scene",
-    )
-
-
-def _floats(n: int | None = None) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": "array", "items": {"type": "number"}}
-    if n is not None:
-        out.update(minItems=n, maxItems=n)
-    return out
-
-
-SCHEMAS: dict[str, dict[str, Any]] = {
-    "foxglove.FrameTransforms": _obj(
-        "foxglove.FrameTransforms", {"transforms": _array(_frame_transform())},
-        "An array of FrameTransform messages",
-    ),
-    "foxglove.SceneUpdate": _obj(
-        "foxglove.SceneUpdate",
-        {
-            "deletions": _array(_obj("foxglove.SceneEntityDeletion",
-                                     {"timestamp": _time(), "type": {"type": "integer"},
-                                      "id": {"type": "string"}})),
-            "entities": _array(_scene_entity()),
-        },
-        "An update to the entities displayed in a 3D scene",
-    ),
-    "foxglove.PoseInFrame": _obj(
-        "foxglove.PoseInFrame",
-        {"timestamp": _time(), "frame_id": {"type": "string"}, "pose": _pose()},
-        "A timestamped pose for an object or reference frame in 3D space",
-    ),
-    "foxglove.PosesInFrame": _obj(
-        "foxglove.PosesInFrame",
-        {"timestamp": _time(), "frame_id": {"type": "string"}, "poses": _array(_pose())},
-        "An array of timestamped poses for an object or reference frame in 3D space",
-    ),
-    "foxglove.Grid": _obj(
-        "foxglove.Grid",
-        {
-            "timestamp": _time(),
-            "frame_id": {"type": "string"},
-            "pose": _pose(),
-            "column_count": {"type": "integer", "minimum": 0},
-            "cell_size": _obj("foxglove.Vector2", {"x": _num(), "y": _num()}),
-            "row_stride": {"type": "integer", "minimum": 0},
-            "cell_stride": {"type": "integer", "minimum": 0},
-            "fields": _array(_obj("foxglove.PackedElementField",
-                                  {"name": {"type": "string"},
-                                   "offset": {"type": "integer", "minimum": 0},
-                                   "type": {"type": "integer"}})),
-            "data": {"type": "string", "contentEncoding": "base64"},
-        },
-        "A 2D grid of data",
-    ),
-    "mjx_stairs.JointState": _obj(
-        "mjx_stairs.JointState",
-        {"timestamp": _time(), "name": _array({"type": "string"}), "position": _floats(12),
-         "velocity": _floats(12), "effort": _floats(12)},
-        "Joint positions (rad), velocities (rad/s) and torques (N m) in JOINT_NAMES order",
-    ),
-    "mjx_stairs.FootContacts": _obj(
-        "mjx_stairs.FootContacts",
-        {"timestamp": _time(), **{leg: {"type": "boolean"} for leg in rb.LEGS}},
-        "Whether each foot sphere touches the terrain",
-    ),
-    "mjx_stairs.Action": _obj(
-        "mjx_stairs.Action",
-        {"timestamp": _time(), "action": _floats(12), "q_target": _floats(12)},
-        "Policy action (clipped as applied) and PD target q_nominal + action_scale * action",
-    ),
-    "mjx_stairs.Status": _obj(
-        "mjx_stairs.Status",
-        {"timestamp": _time(), "done": {"type": "boolean"}, "terminated": {"type": "boolean"},
-         "success": {"type": "boolean"}, "goal_distance": _num(),
-         "episode_step": {"type": "integer"}, "tile": {"type": "integer"}},
-        "Episode status after the step (done: the episode ended and the robot was reset)",
-    ),
-}
-
-
-def _reward_schema(terms: list[str]) -> dict[str, Any]:
-    return _obj(
-        "mjx_stairs.Reward",
-        {"timestamp": _time(), "total": _num(), **{t: _num() for t in terms}},
-        "Reward of the step: total and each term, already weighted and times dt",
-    )
-
 
 # ----------------------------------------------------------------------------- message parts
 
@@ -383,18 +202,16 @@ def robot_topics(i: int) -> list[str]:
 
 def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | None = None,
                path_every_s: float = 0.1) -> dict[str, int]:
-    """Write rollout `r` (tools.play.Rollout) of `env` to `path`; returns {topic: count}."""
+    """Write rollout `r` (tools.play.Rollout) of `env` to `path`; returns {topic: count}.
+
+    Long: the channels, the static topics, then the frames, in the order the file holds them.
+    """
     from mcap.writer import CompressionType, Writer
 
     path = Path(path)
     model = env.robot.mj_model
-    ids = env.robot.ids
     data = mujoco.MjData(model)
-    hm = env.config.height_map
-    n_vec = env.observation_size["state"][0] - hm.size * hm.size
     terms = sorted(r.terms)
-    nominal = np.asarray(rb.NOMINAL_JOINT_POS, np.float64)
-    action_scale = env.config.robot.action_scale
     path_stride = max(1, int(round(path_every_s / r.dt)))
     counts: dict[str, int] = {}
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
@@ -402,7 +219,7 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
         w.start(profile="", library="mjx_stairs")
         schema_ids = {
             name: w.register_schema(name, "jsonschema", json.dumps(s).encode())
-            for name, s in {**SCHEMAS, "mjx_stairs.Reward": _reward_schema(terms)}.items()
+            for name, s in {**SCHEMAS, "mjx_stairs.Reward": reward_schema(terms)}.items()
         }
         channels: dict[str, int] = {}
 
@@ -446,65 +263,71 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
         paths: list[list[dict[str, Any]]] = [[] for _ in range(r.num_robots)]
         for k in range(r.num_frames):
             t_ns = int(round((k + 1) * r.dt * NS))
-            ts = stamp(t_ns)
-            transforms = []
+            put("/tf", t_ns, {"transforms": _transforms(model, data, r.qpos[k], stamp(t_ns))})
             for i in range(r.num_robots):
-                q = r.qpos[k, i]
-                pre = f"robot{i}"
-                yaw = quat_yaw(np.asarray(q[3:7], np.float64), np)
-                transforms.append({"timestamp": ts, "parent_frame_id": "world",
-                                   "child_frame_id": f"{pre}/base", "translation": _v3(q[:3]),
-                                   "rotation": _q(q[3:7])})
-                transforms.append({"timestamp": ts, "parent_frame_id": "world",
-                                   "child_frame_id": f"{pre}/heading",
-                                   "translation": _v3(q[:3]), "rotation": _q(yaw_quat(yaw, np))})
-                for b, pos, quat in body_transforms(model, data, q):
-                    parent = model.body(model.body_parentid[b]).name
-                    transforms.append({"timestamp": ts,
-                                       "parent_frame_id": f"{pre}/{parent}",
-                                       "child_frame_id": f"{pre}/{model.body(b).name}",
-                                       "translation": _v3(pos), "rotation": _q(quat)})
-            put("/tf", t_ns, {"transforms": transforms})
-
-            for i in range(r.num_robots):
-                tp = robot_topics(i)
-                q = r.qpos[k, i]
-                goal = r.goal[k, i]
-                put(tp[0], t_ns, {"timestamp": ts, "frame_id": "world",
-                                  "pose": _pose_msg(goal[:3], yaw_quat(float(goal[3]), np))})
-                if k == 0 or r.step[k, i] == 0:  # a new episode (0: fresh after a reset)
-                    paths[i] = []
-                pose = _pose_msg(q[:3], q[3:7])
-                if r.step[k, i] % path_stride == 0 or not paths[i]:
-                    paths[i].append(pose)
-                shown = paths[i] if paths[i][-1] is pose else [*paths[i], pose]
-                put(tp[1], t_ns, {"timestamp": ts, "frame_id": "world", "poses": shown})
-                put(tp[2], t_ns, {
-                    "timestamp": ts, "name": list(rb.JOINT_NAMES),
-                    "position": [float(x) for x in q[ids.qpos_joints]],
-                    "velocity": [float(x) for x in r.qvel[k, i][ids.qvel_joints]],
-                    "effort": [float(x) for x in r.torque[k, i]],
-                })
-                put(tp[3], t_ns, {"timestamp": ts, **{
-                    leg: bool(c) for leg, c in zip(rb.LEGS, r.foot_contact[k, i],
-                                                   strict=True)}})
-                put(tp[4], t_ns, height_grid(r.obs[k, i, n_vec:], t_ns, f"robot{i}/heading",
-                                             hm.size, hm.spacing, -rb.NOMINAL_BASE_HEIGHT))
-                put(tp[5], t_ns, {"timestamp": ts, "total": float(r.reward[k, i]),
-                                  **{t: float(r.terms[t][k, i]) for t in terms}})
-                a = r.action[k, i]
-                put(tp[6], t_ns, {"timestamp": ts, "action": [float(x) for x in a],
-                                  "q_target": [float(x) for x in
-                                               nominal + action_scale * a]})
-                put(tp[7], t_ns, {
-                    "timestamp": ts, "done": bool(r.done[k, i] > 0),
-                    "terminated": bool(r.terminated[k, i] > 0),
-                    "success": bool(r.success[k, i] > 0),
-                    "goal_distance": float(np.linalg.norm(goal[:2] - q[:2])),
-                    "episode_step": int(r.step[k, i]), "tile": int(r.tile[k, i]),
-                })
+                msgs = _robot_messages(env, r, k, i, t_ns, paths[i], path_stride, terms)
+                for topic, msg in zip(robot_topics(i), msgs, strict=True):
+                    put(topic, t_ns, msg)
         w.finish()
     return counts
+
+
+def _transforms(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray,
+                ts: dict[str, int]) -> list[dict[str, Any]]:
+    """/tf of one frame: per robot world -> base, world -> heading, and every leg body."""
+    out = []
+    for i, q in enumerate(qpos):
+        pre = f"robot{i}"
+        yaw = quat_yaw(np.asarray(q[3:7], np.float64), np)
+        out.append({"timestamp": ts, "parent_frame_id": "world", "child_frame_id": f"{pre}/base",
+                    "translation": _v3(q[:3]), "rotation": _q(q[3:7])})
+        out.append({"timestamp": ts, "parent_frame_id": "world",
+                    "child_frame_id": f"{pre}/heading", "translation": _v3(q[:3]),
+                    "rotation": _q(yaw_quat(yaw, np))})
+        for b, pos, quat in body_transforms(model, data, q):
+            parent = model.body(model.body_parentid[b]).name
+            out.append({"timestamp": ts, "parent_frame_id": f"{pre}/{parent}",
+                        "child_frame_id": f"{pre}/{model.body(b).name}",
+                        "translation": _v3(pos), "rotation": _q(quat)})
+    return out
+
+
+def _robot_messages(env, r, k: int, i: int, t_ns: int, path: list[dict[str, Any]],
+                    path_stride: int, terms: list[str]) -> list[dict[str, Any]]:
+    """Robot i's messages of frame k, in robot_topics order; ``path`` (the running episode's
+    poses) is updated in place."""
+    ids, hm = env.robot.ids, env.config.height_map
+    ts = stamp(t_ns)
+    q, goal = r.qpos[k, i], r.goal[k, i]
+    if k == 0 or r.step[k, i] == 0:  # a new episode (0: fresh after a reset)
+        path.clear()
+    pose = _pose_msg(q[:3], q[3:7])
+    if r.step[k, i] % path_stride == 0 or not path:
+        path.append(pose)
+    shown = path if path[-1] is pose else [*path, pose]
+    a = r.action[k, i]
+    nominal = np.asarray(rb.NOMINAL_JOINT_POS, np.float64)
+    return [
+        {"timestamp": ts, "frame_id": "world",
+         "pose": _pose_msg(goal[:3], yaw_quat(float(goal[3]), np))},
+        {"timestamp": ts, "frame_id": "world", "poses": shown},
+        {"timestamp": ts, "name": list(rb.JOINT_NAMES),
+         "position": [float(x) for x in q[ids.qpos_joints]],
+         "velocity": [float(x) for x in r.qvel[k, i][ids.qvel_joints]],
+         "effort": [float(x) for x in r.torque[k, i]]},
+        {"timestamp": ts, **{leg: bool(c) for leg, c in zip(rb.LEGS, r.foot_contact[k, i],
+                                                           strict=True)}},
+        height_grid(r.obs[k, i, observation.N_VEC:], t_ns, f"robot{i}/heading", hm.size,
+                    hm.spacing, -rb.NOMINAL_BASE_HEIGHT),
+        {"timestamp": ts, "total": float(r.reward[k, i]),
+         **{t: float(r.terms[t][k, i]) for t in terms}},
+        {"timestamp": ts, "action": [float(x) for x in a],
+         "q_target": [float(x) for x in nominal + env.config.robot.action_scale * a]},
+        {"timestamp": ts, "done": bool(r.done[k, i] > 0),
+         "terminated": bool(r.terminated[k, i] > 0), "success": bool(r.success[k, i] > 0),
+         "goal_distance": float(np.linalg.norm(goal[:2] - q[:2])),
+         "episode_step": int(r.step[k, i]), "tile": int(r.tile[k, i])},
+    ]
 
 
 def read_mcap(path: str | os.PathLike) -> dict[str, list[tuple[int, dict[str, Any]]]]:
