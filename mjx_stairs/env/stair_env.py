@@ -369,8 +369,6 @@ class StairEnv(Env):
         }
         return observation.assemble(values, self.config.height_map, self.config.noise, rng)
 
-    # ------------------------------------------------------------------ compact state
-
     def pack_state(self, state: State) -> dict[str, Any]:
         """The part of a State that a resume needs (~2.4 kB per robot instead of ~53 kB).
 

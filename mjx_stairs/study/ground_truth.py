@@ -175,6 +175,8 @@ def first_second(
     The actions: the policy's, closed-loop in the ground truth; each MJX option replays them
     open-loop. Per option: the mean and 90th percentile over robots of the base position error
     at each policy step, and the mean |difference| of the total net vertical contact force.
+
+    Long: the ground truth and each MJX option replayed side by side, step by step.
     """
     env = cell_env(policy, spec)
     state = initial_states(env, spec)
