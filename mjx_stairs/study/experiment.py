@@ -130,13 +130,13 @@ def publish(run_dir: str | Path, dest: str | Path, record: dict[str, Any], stop:
     import platform
 
     from mjx_stairs import atomic
-    from mjx_stairs.rl import logger as logging_utils
+    from mjx_stairs.rl import logger
 
     run_dir, dest = Path(run_dir), Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     for name in ("policy.npz", "metrics.jsonl", "config.json"):
         atomic.copy_file(run_dir / name, dest / name)
-    rows = logging_utils.read_jsonl(run_dir / "metrics.jsonl")
+    rows = logger.read_jsonl(run_dir / "metrics.jsonl")
     rates = [r["perf/steps_per_s"] for r in rows[1:]] or [r["perf/steps_per_s"] for r in rows]
     facts = {
         "run_dir": str(run_dir),
