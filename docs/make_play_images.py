@@ -20,7 +20,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from mjx_stairs import play  # noqa: E402
+from mjx_stairs.tools import play  # noqa: E402
 from mjx_stairs.atomic import atomic_path  # noqa: E402  (play sets MUJOCO_GL before mujoco is imported)
 
 
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     from PIL import Image
 
     from mjx_stairs import mcap_log
-    from mjx_stairs.train import load_policy
+    from mjx_stairs.rl.policy import load_policy
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
