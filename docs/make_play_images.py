@@ -52,7 +52,7 @@ def plot_mcap(mcap_path: Path, out: Path, title: str) -> None:
     import numpy as np
     from matplotlib.collections import PolyCollection
 
-    from mjx_stairs import mcap_log
+    from mjx_stairs.tools import mcap_log
 
     log = mcap_log.read_mcap(mcap_path)
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6), dpi=100,
@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from PIL import Image
 
-    from mjx_stairs import mcap_log
+    from mjx_stairs.tools import mcap_log
     from mjx_stairs.rl.policy import load_policy
 
     out = Path(args.out)
