@@ -142,8 +142,7 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
         check_family(f)
     if variants_per_family < 1:
         raise ValueError(f"variants_per_family must be >= 1, got {variants_per_family}")
-    if border < 0:
-        raise ValueError(f"border must be >= 0, got {border}")
+    _check_border(border, resolution)
     if direction not in ATLAS_DIRECTIONS:
         raise ValueError(f"unknown direction {direction!r}; known: {', '.join(ATLAS_DIRECTIONS)}")
     dirs = ("up", "down") if direction == "both" else (direction,)
@@ -156,15 +155,9 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
     levels = [int(v) for v in levels]
     if not levels:
         raise ValueError("build_atlas needs at least one level")
-    rows, cols = len(levels), len(families) * variants_per_family * len(dirs)
-    n = int(round(tile_size / resolution))
-    b = int(round(border / resolution))
-    if abs(b * resolution - border) > 1e-6 * max(border, 1.0):
-        raise ValueError(f"border {border} m must be a whole multiple of the resolution "
-                         f"{resolution} m")
-    heights = np.zeros((2 * b + rows * n + 1, 2 * b + cols * n + 1), np.float32)
-    tabs = {k: [] for k in _TABLES}
-    for row, lvl in enumerate(levels):
+    cols = len(families) * variants_per_family * len(dirs)
+
+    def row_tiles(lvl: int):
         for col in range(cols):
             k, di = divmod(col, len(dirs))
             fi, vi = divmod(k, variants_per_family)
@@ -176,13 +169,11 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
                                  direction=dirs[0], seed=seed + cycle)
             else:
                 tile = tile.reversed()
-            iy, ix = b + row * n, b + col * n
-            heights[iy:iy + n, ix:ix + n] = tile.heights
-            _append(tabs, tile, np.array([ix, iy]) * resolution, fi, vi)
-    return Atlas(heights=heights, resolution=resolution, tile_size=tile_size, border=border,
-                 rows=rows, cols=cols, families=families, schedule=schedule,
-                 variant_names=tuple(variants(f) for f in families),
-                 **{k: np.asarray(v, _dtype(k)) for k, v in tabs.items()})
+            yield tile, fi, vi
+
+    return _assemble([list(row_tiles(lvl)) for lvl in levels], resolution, tile_size, border,
+                     families=families, schedule=schedule,
+                     variant_names=tuple(variants(f) for f in families))
 
 
 def build_cell_atlas(cells: Sequence[tuple[str, str, int]], variants_per_cell: int = 2,
@@ -194,23 +185,41 @@ def build_cell_atlas(cells: Sequence[tuple[str, str, int]], variants_per_cell: i
     0-based level in its schedule. For evaluating many cells under one compiled program."""
     if not cells:
         raise ValueError("build_cell_atlas needs at least one cell")
-    n = int(round(tile_size / resolution))
-    b = int(round(border / resolution))
-    rows, cols = len(cells), variants_per_cell
-    heights = np.zeros((2 * b + rows * n + 1, 2 * b + cols * n + 1), np.float32)
-    tabs = {k: [] for k in _TABLES}
-    for row, (fam, schedule, lvl) in enumerate(cells):
+    _check_border(border, resolution)
+    grid = []
+    for fam, schedule, lvl in cells:
         check_family(fam)
         names = variants(fam)
-        for col in range(cols):
-            tile = make_tile(fam, int(lvl), names[col % len(names)], schedule, resolution,
-                             tile_size)
+        grid.append([(make_tile(fam, int(lvl), names[c % len(names)], schedule, resolution,
+                                tile_size), 0, c % len(names)) for c in range(variants_per_cell)])
+    return _assemble(grid, resolution, tile_size, border, families=("cells",), schedule="cells",
+                     variant_names=(tuple(f"v{c}" for c in range(variants_per_cell)),))
+
+
+def _check_border(border: float, resolution: float) -> None:
+    if border < 0:
+        raise ValueError(f"border must be >= 0, got {border}")
+    if abs(round(border / resolution) * resolution - border) > 1e-6 * max(border, 1.0):
+        raise ValueError(f"border {border} m must be a whole multiple of the resolution "
+                         f"{resolution} m")
+
+
+def _assemble(grid: list[list[tuple[Tile, int, int]]], resolution: float, tile_size: float,
+              border: float, **meta) -> Atlas:
+    """The Atlas of ``grid[row][col] = (tile, family index, variant index)`` with a flat
+    border; ``meta``: families, schedule, variant_names."""
+    n = int(round(tile_size / resolution))
+    b = int(round(border / resolution))
+    rows, cols = len(grid), len(grid[0])
+    heights = np.zeros((2 * b + rows * n + 1, 2 * b + cols * n + 1), np.float32)
+    tabs = {k: [] for k in _TABLES}
+    for row, tiles in enumerate(grid):
+        for col, (tile, fi, vi) in enumerate(tiles):
             iy, ix = b + row * n, b + col * n
             heights[iy:iy + n, ix:ix + n] = tile.heights
-            _append(tabs, tile, np.array([ix, iy]) * resolution, 0, col % len(names))
+            _append(tabs, tile, np.array([ix, iy]) * resolution, fi, vi)
     return Atlas(heights=heights, resolution=resolution, tile_size=tile_size, border=border,
-                 rows=rows, cols=cols, families=("cells",), schedule="cells",
-                 variant_names=(tuple(f"v{c}" for c in range(cols)),),
+                 rows=rows, cols=cols, **meta,
                  **{k: np.asarray(v, _dtype(k)) for k, v in tabs.items()})
 
 

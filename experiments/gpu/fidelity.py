@@ -42,9 +42,9 @@ CELLS = (
 
 
 def write(path: Path, record: dict) -> None:
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(record, indent=1))
-    os.replace(tmp, path)
+    from mjx_stairs.atomic import write_text
+
+    write_text(path, json.dumps(record, indent=1))
 
 
 def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float) -> None:

@@ -53,6 +53,27 @@ def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[StairEnv, Any]:
     return StairEnv(atlas, cfg), levels
 
 
+def first_episodes(env: StairEnv, policy: Policy, state) -> tuple[jax.Array, ...]:
+    """(finished, succeeded, fell) [B] of each robot's first episode from `state`, the policy's
+    mean action, over `env.episode_steps` steps (traceable: jit it)."""
+
+    def body(carry, _):
+        st, finished, succeeded, fell = carry
+        st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
+        first = (st.done > 0) & ~finished
+        succeeded = succeeded | (first & (st.metrics["episode_success"] > 0))
+        fell = fell | (first & (st.metrics["terminated"] > 0))
+        return (st, finished | (st.done > 0), succeeded, fell), None
+
+    zeros = jnp.zeros(state.done.shape, bool)
+    return jax.lax.scan(body, (state, zeros, zeros, zeros), None, env.episode_steps)[0][1:]
+
+
+def _check_finished(finished: np.ndarray) -> None:
+    if not finished.all():
+        raise RuntimeError("evaluation ended with robots still in their first episode")
+
+
 def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     """Run robots_per_level robots on every level for one episode each.
 
@@ -64,25 +85,11 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     row = jnp.repeat(jnp.arange(n_levels, dtype=jnp.int32), spec.robots_per_level)
     keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
     state = jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
-
-    def body(carry, _):
-        st, finished, succeeded, fell = carry
-        action = policy_action(policy, st.obs["state"])
-        st = jax.vmap(env.step)(st, action)
-        first = (st.done > 0) & ~finished
-        succeeded = succeeded | (first & (st.metrics["episode_success"] > 0))
-        fell = fell | (first & (st.metrics["terminated"] > 0))
-        return (st, finished | (st.done > 0), succeeded, fell), None
-
-    zeros = jnp.zeros(B, bool)
-    run = jax.jit(
-        lambda s: jax.lax.scan(body, (s, zeros, zeros, zeros), None, env.episode_steps)[0]
-    )
     t0 = time.time()
-    _, finished, succeeded, fell = jax.device_get(run(state))
+    finished, succeeded, fell = jax.device_get(
+        jax.jit(lambda s: first_episodes(env, policy, s))(state))
     wall = time.time() - t0
-    if not finished.all():
-        raise RuntimeError("evaluation ended with robots still in their first episode")
+    _check_finished(finished)
     succ = succeeded.reshape(n_levels, -1).mean(1)
     fall = fell.reshape(n_levels, -1).mean(1)
     return {
@@ -166,24 +173,14 @@ def success_by_cell(policies: dict[str, Policy], spec: CellSpec) -> dict[str, di
     for all policies (their env configs with the overrides must agree)."""
     first = next(iter(policies.values()))
     env = cell_env(first, spec)
+    want = env_config_of(first, spec.env_overrides)
     for name, p in policies.items():
-        if env_config_of(p, spec.env_overrides) != env_config_of(first, spec.env_overrides):
+        if env_config_of(p, spec.env_overrides) != want:
             raise ValueError(f"policy {name!r} needs another env than {next(iter(policies))!r}")
     state = initial_states(env, spec)
 
     def run(st, params, norm, like):
-        policy = like._replace(params=params, normalizer=norm)
-
-        def body(carry, _):
-            st, finished, succeeded, fell = carry
-            st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
-            first_done = (st.done > 0) & ~finished
-            succeeded = succeeded | (first_done & (st.metrics["episode_success"] > 0))
-            fell = fell | (first_done & (st.metrics["terminated"] > 0))
-            return (st, finished | (st.done > 0), succeeded, fell), None
-
-        zeros = jnp.zeros(st.done.shape, bool)
-        return jax.lax.scan(body, (st, zeros, zeros, zeros), None, env.episode_steps)[0][1:]
+        return first_episodes(env, like._replace(params=params, normalizer=norm), st)
 
     compiled: dict[Any, Any] = {}  # one program per (network, observation layout)
     out = {}
@@ -194,8 +191,7 @@ def success_by_cell(policies: dict[str, Policy], spec: CellSpec) -> dict[str, di
             compiled[key] = fn.lower(state, p.params, p.normalizer).compile()
         t0 = time.time()
         finished, succeeded, fell = jax.device_get(compiled[key](state, p.params, p.normalizer))
-        if not finished.all():
-            raise RuntimeError("evaluation ended with robots still in their first episode")
+        _check_finished(finished)
         out[name] = cell_records(spec, succeeded, fell, physics="mjx", wall_s=time.time() - t0,
                                  device=jax.devices()[0].device_kind)
     return out

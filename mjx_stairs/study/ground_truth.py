@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -35,23 +35,18 @@ TILE_MARGIN = 4
 """Grid points beyond a tile's own kept around it in its box world (its walls stand inside)."""
 
 
-def env_heights(env: envlib.StairEnv) -> np.ndarray:
-    """[NY, NX] the atlas heights back from the env's MuJoCo model (float32 rounding)."""
-    return env.terrain.heights()
-
-
-def tile_model(env: envlib.StairEnv, tile: int, tile_size: float,
+def tile_model(env: envlib.StairEnv, heights: np.ndarray, tile: int, tile_size: float,
                solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
                terrain: str = "boxes") -> mujoco.MjModel:
-    """The box world of one atlas tile, in world coordinates (so env states carry over).
-    `terrain="heightfield"`: the atlas heightfield instead of boxes (the shape MJX sees)."""
+    """The box world of one atlas tile, in world coordinates (so env states carry over);
+    `heights` [NY, NX] the atlas heights (`env.terrain.heights()`). `terrain="heightfield"`:
+    the atlas heightfield instead of boxes (the shape MJX sees)."""
     if terrain == "heightfield":
         return bw.build_model(np.zeros((0, 6)), env.config.robot, solver,
-                              heightfield=(env_heights(env), env.resolution))
+                              heightfield=(heights, env.resolution))
     if terrain != "boxes":
         raise ValueError(f"terrain must be 'boxes' or 'heightfield', got {terrain!r}")
     res = env.resolution
-    heights = env_heights(env)
     n = int(round(tile_size / res))
     ox, oy = (int(round(v / res)) for v in env.tile_origin[tile])
     x0, y0 = max(ox - TILE_MARGIN, 0), max(oy - TILE_MARGIN, 0)
@@ -59,6 +54,47 @@ def tile_model(env: envlib.StairEnv, tile: int, tile_size: float,
     y1 = min(oy + n + TILE_MARGIN, heights.shape[0])
     boxes = grid_boxes(heights[y0:y1, x0:x1], res, origin=(x0 * res, y0 * res))
     return bw.build_model(boxes, env.config.robot, solver)
+
+
+class _Start(NamedTuple):
+    """An evaluation's robots, ready for the ground truth: the MJX env (for observation and
+    rules), the robots' first states and infos, their tiles and each tile's MuJoCo model."""
+
+    env: envlib.StairEnv
+    state: Any
+    info: dict
+    tiles: np.ndarray
+    models: list[mujoco.MjModel]  # one per robot (shared by robots of a tile)
+
+
+def _start(policy: Policy, spec: CellSpec, solver: bw.SolverConfig, terrain: str) -> _Start:
+    env = cell_env(policy, spec)
+    state = initial_states(env, spec)
+    info = {k: v for k, v in state.info.items() if k != "final_obs"}
+    tiles = np.asarray(info["tile"])
+    heights = env.terrain.heights()
+    by_tile = {int(t): tile_model(env, heights, int(t), spec.tile_size, solver, terrain)
+               for t in np.unique(tiles)}
+    return _Start(env, state, info, tiles, [by_tile[int(t)] for t in tiles])
+
+
+class _Controller:
+    """The policy as the env runs it: clean observation, mean action, clip, PD target."""
+
+    def __init__(self, env: envlib.StairEnv, policy: Policy, info: dict):
+        self._observe = jax.jit(jax.vmap(lambda q, v, i: env.observe(q, v, i)["state"]))
+        self._act = jax.jit(lambda o: policy_action(policy, o))
+        self._info = dict(info)
+        self._c = env.config
+
+    def __call__(self, qpos: np.ndarray, qvel: np.ndarray, last_action: np.ndarray):
+        """(action [B, 12], PD target [B, 12]) for the robots' state and last action."""
+        self._info["last_action"] = jnp.asarray(last_action)
+        obs = self._observe(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32),
+                            self._info)
+        c = self._c
+        a = np.clip(np.asarray(self._act(obs)), -c.action_clip, c.action_clip)
+        return a, rb.NOMINAL_JOINT_POS + c.robot.action_scale * a
 
 
 @dataclasses.dataclass
@@ -109,18 +145,11 @@ def success_in_ground_truth(
     Robots start from the same states as the MJX evaluation of the same spec (same seed). A
     robot stops once it has succeeded or fallen (success is final in both).
     """
-    env = cell_env(policy, spec)
-    state = initial_states(env, spec)
-    info = {k: v for k, v in state.info.items() if k != "final_obs"}
-    tiles = np.asarray(info["tile"])
+    env, state, info, tiles, models = _start(policy, spec, solver, terrain)
     B = tiles.shape[0]
-    models = {int(t): tile_model(env, int(t), spec.tile_size, solver, terrain)
-              for t in np.unique(tiles)}
-    batch = bw.Batch([models[int(t)] for t in tiles], np.asarray(state.pipeline_state.qpos),
-                     nthread=nthread)
+    batch = bw.Batch(models, np.asarray(state.pipeline_state.qpos), nthread=nthread)
     goal = np.asarray(env.goals)[tiles]
-    observe = jax.jit(jax.vmap(lambda q, v, i: env.observe(q, v, i)["state"]))
-    act = jax.jit(lambda o: policy_action(policy, o))
+    control = _Controller(env, policy, info)
     c = env.config
     ep = _Episodes(B, max(1, int(round(c.success_hold_s / env.dt))))
     last_action = np.zeros((B, 12), np.float32)
@@ -129,11 +158,8 @@ def success_in_ground_truth(
         active = ep.active
         if not active.any():
             break
-        info["last_action"] = jnp.asarray(last_action)
-        obs = observe(jnp.asarray(batch.qpos, jnp.float32), jnp.asarray(batch.qvel, jnp.float32),
-                      info)
-        a = np.clip(np.asarray(act(obs)), -c.action_clip, c.action_clip)
-        batch.step(rb.NOMINAL_JOINT_POS + c.robot.action_scale * a, c.decimation, active)
+        a, target = control(batch.qpos, batch.qvel, last_action)
+        batch.step(target, c.decimation, active)
         last_action = np.where(active[:, None], a, last_action)
         close, fell = _endings(env, batch.qpos, batch.qvel, goal)
         ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)
@@ -178,16 +204,11 @@ def first_second(
 
     Long: the ground truth and each MJX option replayed side by side, step by step.
     """
-    env = cell_env(policy, spec)
-    state = initial_states(env, spec)
-    info = {k: v for k, v in state.info.items() if k != "final_obs"}
-    tiles = np.asarray(info["tile"])
-    models = {int(t): tile_model(env, int(t), spec.tile_size, solver) for t in np.unique(tiles)}
-    robots = [(models[int(t)], mujoco.MjData(models[int(t)])) for t in tiles]
+    env, state, info, _, models = _start(policy, spec, solver, "boxes")
+    robots = [(m, mujoco.MjData(m)) for m in models]
     for (_, d), q in zip(robots, np.asarray(state.pipeline_state.qpos), strict=True):
         d.qpos[:] = q
-    observe = jax.jit(jax.vmap(lambda q, v, i: env.observe(q, v, i)["state"]))
-    act = jax.jit(lambda o: policy_action(policy, o))
+    control = _Controller(env, policy, info)
     c = env.config
     warm, steps = int(round(warmup_s / env.dt)), int(round(horizon_s / env.dt))
     start = None
@@ -198,10 +219,7 @@ def first_second(
         qvel = np.stack([d.qvel.copy() for _, d in robots])
         if k == warm:
             start = (qpos, qvel, last_action.copy())
-        info["last_action"] = jnp.asarray(last_action)
-        obs = observe(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32), info)
-        a = np.clip(np.asarray(act(obs)), -c.action_clip, c.action_clip)
-        target = rb.NOMINAL_JOINT_POS + c.robot.action_scale * a
+        a, target = control(qpos, qvel, last_action)
         for (m, d), q_target in zip(robots, target, strict=True):
             d.ctrl[:] = q_target
             for _ in range(c.decimation):
