@@ -37,7 +37,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from mujoco.mjx._src import collision_convex, collision_driver
+import mujoco
+from mujoco.mjx._src import collision_convex, collision_driver, support
 from mujoco.mjx._src import math as mjx_math
 from mujoco.mjx._src.types import GeomType
 
@@ -144,12 +145,88 @@ def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
 
 
-_COLLIDER = collision_convex.collider(ncon=NCON)(sphere_heightfield)
+def sphere_columns(h, s, subgrid_size: tuple[int, int]):
+    """(dist [NCON], pos [NCON, 3], frame [NCON, 3, 3]) of one sphere against the heightfield's
+    grid read as columns, as `terrains.boxes.grid_boxes` builds the ground truth: grid point
+    (ix, iy) owns the square cell around it (half a spacing each way), a flat-topped column from
+    the field's base up to its height, so risers are vertical and edges sharp.
+
+    The distance to a union of boxes is the least distance to one of them, and the nearest point
+    of an axis-aligned box is the centre clamped to it. The first contact is the nearest column,
+    the second the nearest column in front of the first contact's plane (the riser of a concave
+    corner), as in `sphere_heightfield`. A centre inside a column (the sphere sunk deeper than
+    its radius) is pushed out through that column's top.
+    """
+    r = s.size[0]
+    p = h.mat.T @ (s.pos - h.pos)
+    ncol, nrow = h.ncol, h.nrow
+    dx = 2.0 * h.size[0] / (ncol - 1)
+    dy = 2.0 * h.size[1] / (nrow - 1)
+    # Grid points whose cells reach [p - r, p + r]: at most ceil(2r / dx) + 1 per axis, the
+    # sub-grid MJX sizes from the bounding radius.
+    c0 = jnp.floor((p[0] - r + h.size[0]) / dx + 0.5).astype(jnp.int32)
+    r0 = jnp.floor((p[1] - r + h.size[1]) / dy + 0.5).astype(jnp.int32)
+    ci = jnp.clip(c0 + jnp.arange(subgrid_size[0]), 0, ncol - 1)
+    ri = jnp.clip(r0 + jnp.arange(subgrid_size[1]), 0, nrow - 1)
+    ci, ri = jnp.meshgrid(ci, ri, indexing="ij")
+    ci, ri = ci.ravel(), ri.ravel()
+    top = h.data[ci, ri] * h.size[2]
+    lo = jnp.stack([(ci - 0.5) * dx - h.size[0], (ri - 0.5) * dy - h.size[1],
+                    jnp.full_like(top, -h.size[3])], -1)
+    hi = jnp.stack([(ci + 0.5) * dx - h.size[0], (ri + 0.5) * dy - h.size[1], top], -1)
+    q = jnp.clip(p, lo, hi)  # [C, 3] nearest point of each column
+    d = jnp.linalg.norm(q - p, axis=-1)
+    inside = d <= 0.0
+    sunk = jnp.any(inside)
+    k_in = jnp.argmax(jnp.where(inside, top, -jnp.inf))
+
+    def contact(k):
+        dk = d[k]
+        n = (p - q[k]) / jnp.maximum(dk, 1e-9)
+        return dk - r, q[k] + 0.5 * (dk - r) * n, n
+
+    k1 = jnp.argmin(d)
+    dist1, pos1, n1 = contact(k1)
+    up = jnp.array([0.0, 0.0, 1.0])
+    depth = top[k_in] - p[2]
+    q_in = jnp.stack([p[0], p[1], top[k_in]])
+    dist1 = jnp.where(sunk, -depth - r, dist1)
+    n1 = jnp.where(sunk, up, n1)
+    pos1 = jnp.where(sunk, q_in + 0.5 * (-depth - r) * up, pos1)
+    q1 = jnp.where(sunk, q_in, q[k1])
+    ahead = (q - q1) @ n1 > FRONT * r
+    k2 = jnp.argmin(jnp.where(ahead, d, jnp.inf))
+    dist2, pos2, n2 = contact(k2)
+    dist2 = jnp.where(jnp.any(ahead) & ~sunk, dist2, 1.0)
+    dist = jnp.stack([dist1, dist2])
+    pos = jnp.stack([pos1, pos2]) @ h.mat.T + h.pos
+    n = jnp.stack([n1, n2]) @ h.mat.T
+    return dist, pos, jax.vmap(mjx_math.make_frame)(n)
+
+
+COLUMNS_HFIELD = "terrain_columns"
+"""The heightfield asset name that selects `sphere_columns` (any other name: the nearest-point
+surface collider). MJX keys collision functions by geom types only, and both colliders collide
+(heightfield, ellipsoid) pairs, so the one registered function dispatches on the asset's name."""
+
+_NEAREST = collision_convex.collider(ncon=NCON)(sphere_heightfield)
+_COLUMNS = collision_convex.collider(ncon=NCON)(sphere_columns)
 KEY = (GeomType.HFIELD, GeomType.ELLIPSOID)
 
 
+def _collide(m, d, key, geom):
+    """MJX's collision function for KEY: columns or the nearest-point surface, by asset name."""
+    name = support.id2name(m, mujoco.mjtObj.mjOBJ_HFIELD, int(key.data_ids[0]))
+    return (_COLUMNS if name == COLUMNS_HFIELD else _NEAREST)(m, d, key, geom)
+
+
+_collide.ncon = NCON
+_COLLIDER = _collide
+
+
 def register() -> None:
-    """Make MJX collide (heightfield, ellipsoid) pairs with `sphere_heightfield` (idempotent)."""
+    """Make MJX collide (heightfield, ellipsoid) pairs with `sphere_heightfield` or
+    `sphere_columns` (idempotent)."""
     current = collision_driver._COLLISION_FUNC.get(KEY)
     if current is not None and current is not _COLLIDER:
         raise RuntimeError(f"MJX already has a collision function for {KEY}: {current!r}")

@@ -21,7 +21,7 @@ from mujoco import mjx
 from mujoco.mjx._src import collision_driver
 
 from mjx_stairs.config import ConfigError
-from mjx_stairs.sim import contact  # noqa: F401  (registers the 'nearest' terrain collider)
+from mjx_stairs.sim import contact  # registers the 'nearest' and 'columns' terrain colliders
 
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
 
@@ -75,9 +75,11 @@ class RobotConfig:
     solver_iterations: int = 1  # Newton iterations per physics step
     ls_iterations: int = 5  # line-search iterations per Newton iteration
     shin_collision: bool = True  # collide the mid-shin spheres with the terrain
-    # Sphere-terrain collider: "mjx" (MJX's prism collider, 4 contacts per sphere) or "nearest"
-    # (mjx_stairs.sim.contact: the exact nearest surface point, 2 contacts per sphere).
-    terrain_contacts: Literal["mjx", "nearest"] = "mjx"
+    # Sphere-terrain collider: "mjx" (MJX's prism collider, 4 contacts per sphere), "nearest"
+    # (mjx_stairs.sim.contact: the exact nearest surface point, 2 contacts per sphere) or
+    # "columns" (the same, against the grid as flat-topped columns with vertical risers: the
+    # geometry of the CPU MuJoCo ground truth, terrains.boxes).
+    terrain_contacts: Literal["mjx", "nearest", "columns"] = "mjx"
     friction: float = 0.8  # foot-terrain sliding friction
 
 
@@ -154,28 +156,32 @@ def build_mj_model(
         raise ValueError(f"heights must be a 2-D grid of at least 2 x 2, got shape {heights.shape}")
     if not np.all(np.isfinite(heights)):
         raise ValueError("heights contain NaN or infinite values")
-    add_heightfield(spec, heights, resolution, config.friction)
+    columns = config.terrain_contacts == "columns"
+    add_heightfield(spec, heights, resolution, config.friction,
+                    hfield_name=contact.COLUMNS_HFIELD if columns else "terrain")
     for name in SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0
-    if config.terrain_contacts == "nearest":
+    if config.terrain_contacts in ("nearest", "columns"):
         # The same spheres as ellipsoids with equal radii: MJX then collides them with the
-        # terrain through mjx_stairs.sim.contact (registered for heightfield-ellipsoid pairs).
+        # terrain through mjx_stairs.sim.contact (registered for heightfield-ellipsoid pairs;
+        # the heightfield's asset name picks the surface or the columns).
         for name in (n for group in SPHERE_GROUPS.values() for n in group):
             geom = spec.geom(name)
             geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
             geom.size = [geom.size[0]] * 3
     elif config.terrain_contacts != "mjx":
         raise ValueError(
-            f"robot.terrain_contacts must be 'mjx' or 'nearest', got {config.terrain_contacts!r}"
+            "robot.terrain_contacts must be 'mjx', 'nearest' or 'columns', got "
+            f"{config.terrain_contacts!r}"
         )
     return spec.compile()
 
 
 def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,
-                    friction: float) -> None:
+                    friction: float, hfield_name: str = "terrain") -> None:
     """Add the terrain heightfield `heights` [ny, nx] (at world (ix * res, iy * res)) to `spec`."""
     ny, nx = heights.shape
     lo, hi = float(heights.min()), float(heights.max())
@@ -183,7 +189,7 @@ def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,
     data = (heights - lo) / span if span > 0 else np.zeros_like(heights)
     rx, ry = 0.5 * (nx - 1) * resolution, 0.5 * (ny - 1) * resolution
     spec.add_hfield(
-        name="terrain",
+        name=hfield_name,
         nrow=ny,
         ncol=nx,
         size=[rx, ry, max(span, 1e-3), 0.5],
@@ -192,7 +198,7 @@ def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,
     spec.worldbody.add_geom(
         name="terrain",
         type=mujoco.mjtGeom.mjGEOM_HFIELD,
-        hfieldname="terrain",
+        hfieldname=hfield_name,
         pos=[rx, ry, lo],
         contype=0,
         conaffinity=1,

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 from mujoco import mjx
-from mujoco.mjx._src import collision_driver
+from mujoco.mjx._src import collision_driver, mesh
 from mujoco.mjx._src.collision_types import GeomInfo, HFieldInfo
 from mujoco.mjx._src.types import GeomType
 
@@ -138,7 +138,7 @@ def test_registered_beside_mjx_collider_and_model_is_the_same_robot():
     n_ref = mjx.make_data(mjx.put_model(ref))._impl.contact.dist.shape[0]
     n_lean = mjx.make_data(mjx.put_model(lean))._impl.contact.dist.shape[0]
     assert (n_ref, n_lean) == (16 * 4, 16 * 2)
-    with pytest.raises(ValueError, match="terrain_contacts must be 'mjx' or 'nearest'"):
+    with pytest.raises(ValueError, match="terrain_contacts must be 'mjx', 'nearest' or 'columns'"):
         rb.build_mj_model(heights, RES, rb.RobotConfig(terrain_contacts="box"))
 
 
@@ -224,3 +224,42 @@ def test_mujoco_c_steps_the_nearest_model_like_the_sphere_model():
     assert 0.1 < 4.0 - a[-1, 0] < 0.3  # slid downhill, as in MJX
     np.testing.assert_allclose(a[:, :3], b[:, :3], atol=0.005)
     np.testing.assert_allclose(a[:, 3:7], b[:, 3:7], atol=0.01)
+
+
+def test_columns_collider_is_the_distance_to_the_ground_truth_boxes():
+    """`columns`: the nearest distance to the union of terrains.boxes' boxes (the CPU ground
+    truth's geometry), checked against a numpy clamp over every box, and a second contact only
+    at a concave corner (a tread and its riser)."""
+    from terrains.boxes import grid_boxes
+
+    res = 0.025
+    x = np.arange(64) * res
+    heights = np.tile(0.16 * (x >= 0.8) + 0.16 * (x >= 1.1), (24, 1)).astype(np.float32)
+    m = rb.build_mj_model(heights, res, rb.RobotConfig(terrain_contacts="columns"))
+    mx = mjx.put_model(m)
+    hid = m.geom("terrain").id
+    info = mesh.hfield(mx, int(m.geom_dataid[hid])).replace(
+        pos=jnp.asarray(m.geom_pos[hid]), mat=jnp.eye(3))
+    r = 0.03
+    collide = jax.jit(jax.vmap(lambda p: contact.sphere_columns(
+        info, GeomInfo(p, jnp.eye(3), jnp.full(3, r)), (4, 4))))
+    boxes = grid_boxes(heights, res)
+    rng = np.random.default_rng(0)
+    p = np.stack([rng.uniform(0.6, 1.3, 4000), rng.uniform(0.2, 0.4, 4000),
+                  rng.uniform(-0.02, 0.36, 4000)], -1)
+    lo, hi = boxes[:, :3] - boxes[:, 3:], boxes[:, :3] + boxes[:, 3:]
+    ref = np.linalg.norm(np.clip(p[:, None], lo, hi) - p[:, None], axis=-1).min(-1)
+    dist, pos, frame = collide(jnp.asarray(p, jnp.float32))
+    near = (ref > 0) & (ref < r)
+    assert near.sum() > 200
+    np.testing.assert_allclose(np.asarray(dist[near, 0]), ref[near] - r, atol=1e-5)
+    # A sphere resting in the corner of the first tread and the second riser (at x = 1.0875):
+    corner = jnp.array([[1.0875 - r + 1e-3, 0.3, 0.16 + r - 1e-3]])
+    d2 = np.asarray(collide(corner)[0][0])
+    np.testing.assert_allclose(d2, [-1e-3, -1e-3], atol=1e-5)
+    # ... and on the middle of a tread, or over the convex edge: one contact only.
+    for q in ([0.95, 0.3, 0.16 + r - 1e-3], [1.0875 + 0.01, 0.3, 0.32 + r - 1e-3]):
+        d = np.asarray(collide(jnp.array([q]))[0][0])
+        assert d[0] < 0 and d[1] > 0.5
+    # MJX finds the columns collider through the heightfield's asset name.
+    assert mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_HFIELD, 0) == contact.COLUMNS_HFIELD
