@@ -163,8 +163,7 @@ class Sim:
         for _ in range(w.substeps):
             while self.pending and self.pending[0][0] <= self.n:
                 self.active = self.pending.popleft()[1]
-            tau = ct.pd_torque(self.c, self.active, d.qpos[w.qpos_adr], d.qvel[w.dof_adr])
-            d.ctrl[w.actuator] = tau / w.gear
+            self.apply_pd()
             mujoco.mj_step(m, d)
             self.n += 1
             now |= sw.touching_edges(w)
@@ -173,6 +172,13 @@ class Sim:
         np.add.at(self.onsets, parts[parts >= 0], 1)
         self.touching = now
         return a
+
+    def apply_pd(self) -> np.ndarray:
+        """Set each joint's motor (by name) to the PD torque [12] of the target in effect."""
+        d, w = self.w.data, self.w
+        tau = ct.pd_torque(self.c, self.active, d.qpos[w.qpos_adr], d.qvel[w.dof_adr])
+        d.ctrl[w.actuator] = tau / w.gear
+        return tau
 
     def _maybe_push(self) -> None:
         every = max(1, int(round(self.o.push_every_s / self.c.control_dt)))

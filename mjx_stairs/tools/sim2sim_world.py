@@ -68,11 +68,16 @@ def _load_spec(path: str | os.PathLike | None) -> mujoco.MjSpec:
 
 
 def _add_boxes(spec: mujoco.MjSpec, boxes: np.ndarray) -> None:
-    for i, (cx, cy, cz, hx, hy, hz) in enumerate(np.asarray(boxes, np.float64)):
+    """Stair boxes [M, 6] (centre, half sizes), shaded lighter the higher their top."""
+    boxes = np.asarray(boxes, np.float64)
+    top = boxes[:, 2] + boxes[:, 5]
+    shade = (top - top.min()) / max(np.ptp(top), 1e-6)
+    for i, (cx, cy, cz, hx, hy, hz) in enumerate(boxes):
+        grey = 0.35 + 0.45 * shade[i]
         spec.worldbody.add_geom(
             name=f"stair{i}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[cx, cy, cz],
             size=[hx, hy, hz], contype=1, conaffinity=1, group=TERRAIN_GROUP,
-            friction=[FRICTION, 0.02, 0.01], rgba=[0.55, 0.57, 0.62, 1.0])
+            friction=[FRICTION, 0.02, 0.01], rgba=[grey, grey * 1.02, grey * 1.1, 1.0])
 
 
 def _add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float) -> None:
