@@ -17,6 +17,8 @@ import importlib.metadata
 import platform
 from typing import Any
 
+import numpy as np
+
 from mjx_stairs.env import observation
 from mjx_stairs.env.config import EnvConfig, env_config_from
 from mjx_stairs.rl.policy import STD_EPS, Policy, normaliser_constants, saved_config
@@ -33,6 +35,11 @@ SDK_JOINT_NAMES = tuple(f"{leg}_{part}_joint" for leg in SDK_LEGS
 
 class SidecarError(RuntimeError):
     """The policy's layout is not the stair env's."""
+
+
+def _floats(values) -> list[float]:
+    """float32 values as the decimals they were written as (23.7, not 23.700000762939453)."""
+    return [float(str(np.float32(v))) for v in np.ravel(values)]
 
 
 def _clip_ranges(cfg: EnvConfig) -> dict[str, list[float] | None]:
@@ -91,8 +98,8 @@ def _joints() -> dict[str, Any]:
     ours = list(rb.JOINT_NAMES)
     return {
         "names": ours,
-        "nominal_pos_rad": [float(v) for v in rb.NOMINAL_JOINT_POS],
-        "pos_limits_rad": rb.JOINT_RANGE.tolist(),
+        "nominal_pos_rad": _floats(rb.NOMINAL_JOINT_POS),
+        "pos_limits_rad": [_floats(r) for r in rb.JOINT_RANGE],
         "velocity_limit_rad_s": rb.VELOCITY_LIMIT,
         "sdk_names": list(SDK_JOINT_NAMES),
         "sdk_index": [SDK_JOINT_NAMES.index(n) for n in ours],
@@ -196,7 +203,7 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
         },
         "pd": {
             "kp": robot.kp, "kd": robot.kd,
-            "torque_limit_nm": [float(v) for v in rb.TORQUE_LIMIT * robot.torque_scale],
+            "torque_limit_nm": _floats(rb.TORQUE_LIMIT * robot.torque_scale),
             "law": "tau = clip(kp * (q_target - q) - kd * qd, -torque_limit, torque_limit), "
                    "evaluated every physics step",
         },
