@@ -231,3 +231,246 @@ def test_the_full_robot_stands_on_box_stairs(onnx_file):
                                                        d.contact.geom2[:d.ncon]]
                 if sim.w.part[g] >= 0}
     assert touching == {"foot"} and not sim.fallen()
+
+
+# ----------------------------------------------------------------------------- runner options
+
+
+def _sim(onnx_file, policy=None, **options) -> s2s.Sim:
+    c = ct.load_contract(onnx_file)
+    course = s2s.family_course("straight", 2, resolution=0.05)
+    world = sw.build_world(c, course.heights, course.resolution)
+    sim = s2s.Sim(c, policy or (lambda obs: np.full(12, 0.4)), world, course,
+                  s2s.Options(**options))
+    sim.reset(*course.spawn[[0, 1, 5]])
+    return sim
+
+
+@pytest.mark.parametrize("latency_ms, applied_in_first", [(0.0, True), (10.0, True),
+                                                          (20.0, False)])
+def test_latency_delays_the_pd_target(onnx_file, latency_ms, applied_in_first):
+    """10 ms = 2 physics steps: the target takes over within the first control period; 20 ms
+    = a whole period: the robot holds the previous target (the nominal pose) through it."""
+    sim = _sim(onnx_file, latency_ms=latency_ms)
+    assert sim.delay == int(latency_ms / 5)
+    _, target = ct.action_to_target(sim.c, np.full(12, 0.4))
+    sim.act(sim.observe())
+    want = target if applied_in_first else sim.c.nominal
+    np.testing.assert_allclose(sim.active, want)
+    sim.act(sim.observe())
+    np.testing.assert_allclose(sim.active, target)
+
+
+def test_noise_has_the_training_widths(onnx_file):
+    sim = _sim(onnx_file, noise=True, seed=3)
+    clean = ct.observation(sim.c, sim.measure())
+    diff = np.stack([sim.observe() - clean for _ in range(50)])
+    widths = sim.c.noise
+    assert np.all(np.abs(diff) <= widths + 1e-6)
+    noisy = widths > 0
+    assert np.all(diff.std(0)[noisy] > 0.3 * widths[noisy])  # uniform: std = width / sqrt(3)
+    for name in ("last_action", "goal"):
+        assert np.all(diff[:, sim.c.slices[name]] == 0.0)
+    assert widths[sim.c.slices["joint_vel"]][0] == 1.5  # the sidecar's training value
+
+
+def test_a_push_kicks_the_base_velocity(onnx_file):
+    calm, pushed = (_sim(onnx_file, push=p, push_every_s=0.1, push_speed=0.5, seed=1)
+                    for p in (False, True))
+    dof = calm.w.base_dof
+    for k in range(6):  # a kick when control step 5 starts (every 0.1 s = 5 steps)
+        before = pushed.w.data.qvel[dof:dof + 2].copy()
+        for sim in (calm, pushed):
+            sim.act(sim.observe())
+        if k < 5:
+            np.testing.assert_array_equal(calm.w.data.qvel, pushed.w.data.qvel)
+    kick = pushed.w.data.qvel[dof:dof + 2] - calm.w.data.qvel[dof:dof + 2]
+    assert np.linalg.norm(kick) == pytest.approx(0.5, rel=0.2)
+    assert np.linalg.norm(before) < 0.3
+
+
+def test_trunk_on_a_step_edge_counts_and_on_a_tread_does_not(onnx_file):
+    """The robot upside down with its trunk box on a step's nosing: a trunk touch at an edge;
+    the same on the middle of a tread: a touch, but not at an edge."""
+    c = ct.load_contract(onnx_file)
+    h = np.zeros((40, 80))
+    h[:, 40:] = 0.15  # a step at x = 0.975 m (between grid points 39 and 40)
+    course = s2s.Course("step", h, 0.025, np.array([0.5, 0.5, 0, 0.1, 0.1, 0, 0]),
+                        np.array([1.8, 0.5, 0.15, 0.0]), np.array([[0.5, 0.5, 0], [1.8, 0.5, 0]]))
+    counts = {}
+    for name, x in (("edge", 0.975), ("tread", 1.6)):
+        sim = s2s.Sim(c, lambda obs: np.zeros(12), sw.build_world(c, h, 0.025), course)
+        sim.reset(x, 0.5, 0.0, z=0.15 + 0.057 - 0.002)
+        qpos = sim.w.data.qpos
+        qpos[3:7] = [0.0, 1.0, 0.0, 0.0]  # turned over about x: legs up, trunk top down
+        sim.act(np.zeros(c.obs_size))
+        counts[name] = dict(zip(sw.PARTS, sim.onsets, strict=True))
+        d = sim.w.data
+        assert d.ncon > 0
+    assert counts["edge"]["trunk"] == 1 and counts["tread"]["trunk"] == 0
+    assert all(v == 0 for k, v in counts["edge"].items() if k != "trunk")
+
+
+# ----------------------------------------------------------------------------- the command
+
+
+def test_cli_runs_short_episodes_with_every_option(onnx_file, tmp_path, capsys):
+    out, mcap = tmp_path / "r.json", tmp_path / "r.mcap"
+    code = cli.main(["sim2sim", "--onnx", str(onnx_file), "--family", "u_shaped", "--level", "2",
+                     "--resolution", "0.05", "--episodes", "2", "--episode-s", "0.6",
+                     "--latency-ms", "20", "--noise", "--push", "--push-every", "0.2",
+                     "--out", str(out), "--mcap", str(mcap)])
+    assert code == 0
+    assert "u_shaped_test_2_up: success" in capsys.readouterr().out
+    r = json.loads(out.read_text())
+    assert r["episodes"] == 2 and len(r["records"]) == 2
+    assert r["options"]["latency_ms"] == 20.0 and r["options"]["noise"] and r["options"]["push"]
+    for rec in r["records"]:
+        assert rec["outcome"] in ("timeout", "fell", "success")
+        assert 0 < rec["time_s"] <= 0.6 + 1e-9
+        assert set(rec["edge_contacts"]) == {"trunk", "hip", "thigh", "calf"}
+    assert r["records"][0]["start"] != r["records"][1]["start"]
+    from mjx_stairs.tools import mcap_log
+
+    topics = mcap_log.read_mcap(mcap)
+    steps = round(r["records"][0]["time_s"] / 0.02)
+    assert len(topics["/robot0/joint_states"]) == steps and len(topics["/terrain"]) == 1
+    names = topics["/robot0/joint_states"][0][1]["name"]
+    assert names == list(rb.JOINT_NAMES)
+
+
+@pytest.mark.skipif(not STAGE2.exists(), reason="no stage-2 policy in experiments/results")
+def test_the_stage2_policy_climbs_u_level_1_in_sim2sim(tmp_path):
+    """The published stage-2 policy, exported, on the full-geometry Go2 and box stairs."""
+    export.export(STAGE2, tmp_path / "stage2.onnx")
+    course = s2s.family_course("u_shaped", 1)
+    r = s2s.run(tmp_path / "stage2.onnx", course, s2s.Options(episodes=1, seed=0))
+    (rec,) = r["records"]
+    assert rec["outcome"] == "success" and rec["time_s"] < 15.0
+
+
+def test_the_runner_imports_no_training_code(onnx_file):
+    """The observation is built without the env (or JAX): run an episode in a fresh process."""
+    code = f"""
+import sys
+import numpy as np
+from mjx_stairs.tools import sim2sim as s2s
+course = s2s.family_course("straight", 1, resolution=0.05)
+r = s2s.run({str(onnx_file)!r}, course, s2s.Options(episode_s=0.2))
+assert r["records"][0]["time_s"] > 0
+bad = sorted(m for m in sys.modules if m.startswith(("mjx_stairs.env", "mjx_stairs.rl", "jax")))
+assert not bad, bad
+print("clean")
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, env={"PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu",
+                                        "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0 and "clean" in res.stdout, res.stderr[-2000:]
+
+
+def test_a_mesh_staircase_with_a_route(onnx_file, tmp_path):
+    from terrains.mesh import export_tile
+
+    tile = terrains.make_tile("straight", 0, schedule="test", resolution=0.05, tile_size=7.0)
+    export_tile(tile, tmp_path / "stairs.stl")
+    start, goal = tuple(tile.spawn[:2]), tuple(tile.goal[:2])
+    course = s2s.mesh_course(tmp_path / "stairs.stl", start, goal, resolution=0.05)
+    np.testing.assert_allclose(course.heights.max(), tile.heights.max(), atol=1e-3)
+    mid = (np.asarray(start) + np.asarray(goal)) / 2
+    routed = s2s.mesh_course(tmp_path / "stairs.stl", start, goal, [start, mid, goal], 0.05)
+    assert routed.route.shape == (3, 3)
+    assert routed.route[-1, 2] == pytest.approx(tile.goal[2], abs=0.01)
+    r = s2s.run(onnx_file, routed, s2s.Options(episode_s=0.2))
+    assert r["course"] == "stairs" and r["records"][0]["time_s"] > 0
+
+
+# ----------------------------------------------------------------------------- bad inputs
+
+
+def _one_line_error(capsys, argv) -> str:
+    assert cli.main(["sim2sim", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mjx-stairs sim2sim: error:"), err
+    return err[0]
+
+
+def _copy_onnx(onnx_file, tmp_path) -> Path:
+    dst = tmp_path / "p.onnx"
+    dst.write_bytes(onnx_file.read_bytes())
+    (tmp_path / "p.onnx.json").write_text(ct.sidecar_path(onnx_file).read_text())
+    return dst
+
+
+def _edit_sidecar(path: Path, fn) -> None:
+    side = ct.sidecar_path(path)
+    d = json.loads(side.read_text())
+    fn(d)
+    side.write_text(json.dumps(d))
+
+
+def _without_joint(tmp_path) -> Path:
+    text = sw.OUR_ROBOT.read_text().replace('name="RR_calf_joint"', 'name="RR_knee"')
+    text = text.replace('joint="RR_calf_joint"', 'joint="RR_knee"')
+    (tmp_path / "no_calf.xml").write_text(text)
+    return tmp_path / "no_calf.xml"
+
+
+def _position_servo(tmp_path) -> Path:
+    text = sw.OUR_ROBOT.read_text().replace(
+        '<motor name="FL_hip" joint="FL_hip_joint" ctrlrange="-23.7 23.7"/>',
+        '<position name="FL_hip" joint="FL_hip_joint" kp="30" ctrlrange="-1 1"/>')
+    (tmp_path / "servo.xml").write_text(text)
+    return tmp_path / "servo.xml"
+
+
+def _map_of_20(d: dict) -> None:
+    """A sidecar that holds together on its own (a 20 x 20 map) but not with the graph."""
+    d["onnx"]["sha256"] = None
+    hm = d["height_map"]
+    hm["size"], hm["x_m"], hm["y_m"] = [20, 20], hm["x_m"][:20], hm["y_m"][:20]
+    d["observation"]["layout"][-1]["stop"] = d["observation"]["size"] = N_VEC + 400
+
+
+BAD = {
+    "missing onnx": (lambda f, t: ["--onnx", str(t / "nope.onnx")], "no such ONNX file"),
+    "missing sidecar": (lambda f, t: ["--onnx", str(_copy_onnx(f, t))],
+                        "no sidecar beside"),
+    "sha mismatch": (lambda f, t: ["--onnx", str(_copy_onnx(f, t))], "sidecar mismatch"),
+    "size mismatch": (lambda f, t: ["--onnx", str(_copy_onnx(f, t))], "sidecar mismatch"),
+    "old format": (lambda f, t: ["--onnx", str(_copy_onnx(f, t))], "format"),
+    "missing joint": (lambda f, t: ["--onnx", str(f), "--robot", str(_without_joint(t))],
+                      "no joint named 'RR_calf_joint'"),
+    "not a motor": (lambda f, t: ["--onnx", str(f), "--robot", str(_position_servo(t))],
+                    "not a torque motor"),
+    "missing robot": (lambda f, t: ["--onnx", str(f), "--robot", str(t / "go2.xml")],
+                      "no such robot MJCF"),
+}
+EDITS = {
+    "missing sidecar": lambda p: ct.sidecar_path(p).unlink(),
+    "sha mismatch": lambda p: _edit_sidecar(p, lambda d: d["onnx"].update(sha256="0" * 64)),
+    "size mismatch": lambda p: _edit_sidecar(p, _map_of_20),
+    "old format": lambda p: _edit_sidecar(p, lambda d: d.update(
+        format="mjx_stairs policy sidecar v1")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_inputs_give_one_line_errors(onnx_file, tmp_path, capsys, case):
+    argv, words = BAD[case]
+    args = argv(onnx_file, tmp_path)
+    if case in EDITS:
+        EDITS[case](tmp_path / "p.onnx")
+    err = _one_line_error(capsys, [*args, "--family", "straight", "--level", "1",
+                                   "--resolution", "0.05", "--episode-s", "0.1"])
+    assert words in err
+
+
+@pytest.mark.parametrize("argv, words", [
+    ([], "give a staircase"),
+    (["--family", "straight"], "--level"),
+    (["--family", "straight", "--level", "9"], "out of range"),
+    (["--mesh", "nowhere.stl", "--start", "0,0", "--goal", "1,1"], "no such mesh file"),
+    (["--mesh", "nowhere.stl"], "--start"),
+])
+def test_bad_staircases_give_one_line_errors(onnx_file, capsys, argv, words):
+    assert words in _one_line_error(capsys, ["--onnx", str(onnx_file), *argv])
