@@ -38,7 +38,7 @@ def render(world, frames: list[dict[str, Any]], width: int = 640, height: int = 
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
     cam.trackbodyid = world.base_body
-    cam.distance, cam.azimuth, cam.elevation = 2.4, 225.0, -25.0
+    cam.distance, cam.azimuth, cam.elevation = 3.0, 225.0, -65.0  # above the stair walls
     shown = mujoco.MjvOption()  # visual groups 1 and 2 and the stairs, no collision geoms
     shown.geomgroup[:] = 0
     shown.geomgroup[[1, 2, TERRAIN_GROUP]] = 1
