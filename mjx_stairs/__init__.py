@@ -5,6 +5,6 @@ Layers, each importing only those before it:
   env/    the stair env: observation, rewards, endings, curriculum (imports sim)
   rl/     PPO, networks, the compiled trainer, checkpoints and policy files (no env, no sim)
   study/  experiments, evaluation, the paper's figures and tables, benchmarks
-  tools/  play (video, MCAP), export (ONNX)
+  tools/  play (video, MCAP), export (ONNX + sidecar), sim2sim (the ONNX policy in MuJoCo)
 terrains/ (a sibling package) builds the staircases and imports nothing of mjx_stairs.
 """

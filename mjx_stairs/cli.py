@@ -1,4 +1,5 @@
-"""The `mjx-stairs` command: train, eval, critic-map, bench, exp1, terrain, play, export."""
+"""The `mjx-stairs` command: train, eval, critic-map, bench, exp1, terrain, play, export,
+sim2sim."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from typing import Any
 from mjx_stairs.config import ConfigError
 from mjx_stairs.rl.checkpoint import CheckpointError
 from mjx_stairs.study.specs import EvalSpec
+from mjx_stairs.tools import sim2sim_cli
 from mjx_stairs.tools.specs import PlaySpec
 
 
@@ -328,6 +330,7 @@ def _add_tools(sub) -> None:
         "--no-verify", dest="verify", action="store_false", help="skip the onnxruntime vs JAX check"
     )
     ex.set_defaults(fn=cmd_export)
+    sim2sim_cli.add_parser(sub)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,15 +11,16 @@ added) to the mean action `action` [batch, 12], exactly as `policy.policy_action
     actor MLP on concat(latent, vec): Gemm + Elu per hidden layer, Gemm out
 
 Built with onnx.helper at opset 17 (Sub, Div, Clip, Slice, Reshape, Conv, Elu, MaxPool,
-ReduceMean, Concat, Transpose, Flatten, Gemm). The sidecar (`<file>.json`) is what a robot-side
-runner needs beside the graph: the observation layout with units, the joint order, the nominal
-pose, the action -> PD target rule, PD gains, torque limits, rates and the height-map geometry.
+ReduceMean, Concat, Transpose, Flatten, Gemm). The sidecar (`<file>.json`,
+mjx_stairs.tools.sidecar) is what a robot-side runner needs beside the graph: the observation
+layout with units, scales and clips, the joint orders (ours and the Go2 SDK's), the nominal pose,
+the action -> PD target rule, PD gains, torque limits, rates, the height-map geometry, the goal
+convention and the versions.
 Both files are written through a temporary file and os.replace.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from pathlib import Path
@@ -29,19 +30,10 @@ import jax
 import numpy as np
 
 from mjx_stairs import atomic
-from mjx_stairs.env import observation
-from mjx_stairs.env.config import env_config_from
-from mjx_stairs.rl.policy import (
-    STD_EPS,
-    Policy,
-    load_policy,
-    normaliser_constants,
-    policy_action,
-    saved_config,
-)
-from mjx_stairs.sim import robot as rb
+from mjx_stairs.rl.policy import Policy, load_policy, normaliser_constants, policy_action
+from mjx_stairs.tools import sidecar as sidecar_lib
 
-OPSET = 17
+OPSET = sidecar_lib.OPSET
 
 class ExportError(RuntimeError):
     """The policy cannot be exported (missing onnx, unsupported layout)."""
@@ -172,105 +164,11 @@ def build_onnx(policy: Policy, opset: int = OPSET):
 
 
 def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
-    """What a runner needs beside the graph, as a JSON-serialisable dict.
-
-    Long: one JSON document, section by section.
-    """
-    cfg = env_config_from(saved_config(policy, "env"))
-    layout = policy.layout
-    hm = cfg.height_map
-    n_vec = observation.N_VEC
-    if layout.n_vec != n_vec or tuple(layout.map_shape) not in ((hm.size, hm.size),):
-        raise ExportError(
-            f"policy layout (vec {layout.n_vec}, map {tuple(layout.map_shape)}) is not the stair "
-            f"env's (vec {n_vec}, map {(hm.size, hm.size)})"
-        )
-    noise = cfg.noise
-    entries, i = [], 0
-    for term in observation.terms(hm):
-        desc = term.description
-        if term.name == "goal" and cfg.goal_mode == "waypoint":
-            desc = (
-                f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
-                "further along the stair centre-line than the base's projection on it, with the "
-                "centre-line's heading there as its yaw, and the final goal (position and yaw) "
-                f"once that is nearer than {cfg.waypoint_lookahead_m:g} m along the line "
-                "(mjx_stairs.env.tiles.TileTables.waypoint)"
-            )
-        if term.name == "height_map":
-            desc = f"{desc}; index = {i} + row * {hm.size} + col"
-        entries.append({"name": term.name, "start": i, "stop": i + term.size, "unit": term.unit,
-                        "scale": term.scale, "description": desc,
-                        "training_noise": getattr(noise, term.noise) if term.noise else 0.0})
-        i += term.size
-    half = 0.5 * (hm.size - 1) * hm.spacing
-    robot = cfg.robot
-    dt = robot.timestep * cfg.decimation
-    norm = normaliser_constants(policy)
-    meta = policy.metadata
-    out: dict[str, Any] = {
-        "format": "mjx_stairs policy sidecar v1",
-        "onnx": {
-            "input": {"name": "obs", "shape": ["batch", layout.obs_size], "dtype": "float32",
-                      "what": "raw observation, NOT normalised (the graph normalises)"},
-            "output": {"name": "action", "shape": ["batch", policy.action_size],
-                       "dtype": "float32", "what": "mean action (deterministic)"},
-            "opset": OPSET,
-            "sha256": hashlib.sha256(onnx_bytes).hexdigest() if onnx_bytes else None,
-        },
-        "observation": {
-            "size": layout.obs_size,
-            "layout": entries,
-            "scales": "every entry is its SI value times its scale (1); the graph's normaliser "
-                      "(mean/std from training) does all scaling",
-            "noise": (f"the graph adds no noise; training added uniform noise of the given "
-                      f"half-widths ({'on' if noise.enabled else 'off'} in training)"),
-            "frames": "base (body) frame: x forward, y left, z up; world z up",
-        },
-        "normalizer": None if norm is None else {
-            "applied_in_graph": True, "clip": norm[2], "std_eps": STD_EPS,
-            "formula": "clip((obs - mean) / (std + std_eps), -clip, clip)",
-        },
-        "height_map": {
-            "size": [hm.size, hm.size], "spacing_m": hm.spacing, "offset_m": hm.offset,
-            "clip_m": hm.clip,
-            "frame": "centred on the base position, rotated by the base yaw only (gravity "
-                     "aligned, no pitch/roll)",
-            "rows": f"y in the yaw frame (left +), from {-half:g} m (row 0) to {half:g} m",
-            "cols": f"x in the yaw frame (forward +), from {-half:g} m (col 0) to {half:g} m",
-            "value": f"base_z - terrain_z - {hm.offset}, clipped to +-{hm.clip} m",
-        },
-        "joints": {
-            "names": list(rb.JOINT_NAMES),
-            "nominal_pos_rad": [float(v) for v in rb.NOMINAL_JOINT_POS],
-            "pos_limits_rad": rb.JOINT_RANGE.tolist(),
-            "velocity_limit_rad_s": rb.VELOCITY_LIMIT,
-        },
-        "action": {
-            "size": policy.action_size,
-            "clip": cfg.action_clip,
-            "scale": robot.action_scale,
-            "rule": "q_target = nominal_pos + scale * clip(action, -clip, clip); feed the "
-                    "clipped action back as last_action",
-        },
-        "pd": {
-            "kp": robot.kp, "kd": robot.kd,
-            "torque_limit_nm": [float(v) for v in rb.TORQUE_LIMIT * robot.torque_scale],
-            "law": "tau = clip(kp * (q_target - q) - kd * qd, -torque_limit, torque_limit), "
-                   "evaluated every physics step",
-        },
-        "rates": {
-            "control_hz": 1.0 / dt, "control_dt_s": dt,
-            "physics_dt_s": robot.timestep, "physics_steps_per_action": cfg.decimation,
-        },
-        "policy": {
-            "iteration": meta.get("iteration"),
-            "env_steps": meta.get("env_steps"),
-            "network": meta.get("network"),
-            "config": meta.get("config"),
-        },
-    }
-    return out
+    """The JSON sidecar of the policy (mjx_stairs.tools.sidecar)."""
+    try:
+        return sidecar_lib.sidecar(policy, onnx_bytes)
+    except sidecar_lib.SidecarError as e:
+        raise ExportError(str(e)) from None
 
 
 def export(checkpoint: str | os.PathLike, onnx_path: str | os.PathLike) -> dict[str, Any]:

@@ -223,3 +223,50 @@ def test_sidecar_says_what_the_goal_input_is(policy, exported):
     side = export.sidecar(policy._replace(metadata=meta))
     (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
     assert "waypoint" in goal["description"] and "1.5 m" in goal["description"]
+
+
+def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
+    """Each field beyond v1: clip ranges, the SDK motor order, the map's points, the goal rule,
+    the evaluation rules, the base velocity and the versions; read back by the robot side."""
+    import importlib.metadata
+
+    import mujoco
+
+    from mjx_stairs.tools import contract as ct
+    from mjx_stairs.tools import sidecar
+
+    path, side = exported
+    assert side["format"] == sidecar.FORMAT == ct.FORMAT
+    clips = {e["name"]: e["clip"] for e in side["observation"]["layout"]}
+    cfg = ExperimentConfig().env
+    assert clips["last_action"] == [-cfg.action_clip, cfg.action_clip]
+    assert clips["height_map"] == [-cfg.height_map.clip, cfg.height_map.clip]
+    assert clips["base_lin_vel"] is None
+    assert [e["scale"] for e in side["observation"]["layout"]] == [1.0] * 8
+    units = {e["name"]: e["unit"] for e in side["observation"]["layout"]}
+    assert units["joint_vel"] == "rad/s" and units["height_map"] == "m"
+    j = side["joints"]
+    # the Go2 SDK's motor order: FR, FL, RR, RL x (hip, thigh, calf)
+    assert j["sdk_names"][:4] == ["FR_hip_joint", "FR_thigh_joint", "FR_calf_joint",
+                                  "FL_hip_joint"]
+    assert [j["sdk_names"][k] for k in j["sdk_index"]] == j["names"]
+    assert j["sdk_index"][:3] == [3, 4, 5] and j["sdk_index"][6:9] == [9, 10, 11]
+    c = ct.load_contract(path)
+    x = np.arange(12.0)
+    np.testing.assert_array_equal(ct.from_sdk(c, ct.to_sdk(c, x)), x)
+    assert ct.to_sdk(c, x)[0] == j["names"].index("FR_hip_joint")
+    assert j["nominal_pos_rad"][:3] == [0.1, 0.8, -1.5]  # decimals, not float32 noise
+    hm = side["height_map"]
+    np.testing.assert_allclose(np.diff(hm["x_m"]), hm["spacing_m"])
+    assert hm["x_m"][0] == -2.0 and hm["y_m"][-1] == 2.0 and len(hm["y_m"]) == 21
+    assert side["goal"]["mode"] == cfg.goal_mode and "waypoint" in side["goal"]
+    ev = side["evaluation"]
+    assert (ev["success_distance_m"], ev["success_speed_m_s"], ev["success_hold_s"]) == (
+        cfg.success_distance, cfg.success_speed, cfg.success_hold_s)
+    assert (ev["max_tilt_rad"], ev["min_base_height_m"]) == (cfg.max_tilt, cfg.min_base_height)
+    assert ev["spawn_height_m"] == cfg.spawn_height
+    assert "base frame" in side["base_velocity"]
+    v = side["versions"]
+    assert v["mujoco"] == mujoco.__version__ and v["jax"] == jax.__version__
+    assert v["mjx_stairs"] == importlib.metadata.version("mjx_stairs") and v["python"]
+    assert c.kp == side["pd"]["kp"] and c.control_dt == pytest.approx(0.02)

@@ -1,0 +1,231 @@
+"""Issue 25's sim-to-sim table: a policy, exported to ONNX, in MuJoCo itself (full-geometry Go2,
+box stairs, observation from the sidecar; mjx_stairs.tools.sim2sim) on the U-shaped test levels
+1-6 and the `code` suite, N episodes per cell over a pool of CPU processes.
+
+    python experiments/gpu/sim2sim_table.py --policy experiments/results/stage2_u/policy.npz \\
+        --out experiments/results/sim2sim/stage2_u --episodes 200 --workers 16 \\
+        --mjx-json experiments/results/ground_truth/mjx/mjx_reference.json --mjx-policy stage2_u
+
+Every cell's JSON (out/cells/<cell>.json: success, falls, step-edge contacts per episode, every
+episode) is written atomically as soon as its episodes are in; a rerun skips the cells already
+written (--force redoes them). out/table.md is rewritten after each cell.
+
+Starts: on the U-shaped cells, the robots start where `mjx-stairs eval` (study.evaluate.
+initial_states, same seed, `episodes` robots per cell, two variants per cell) starts them, on
+their own variant's tile, so that `--mjx` (the MJX evaluation of those very starts, run here
+first; use a GPU host) gives a paired gap. The code suite has no MJX evaluation yet: its starts
+are sim2sim's own (seeded, uniform on the spawn area). `--mjx-json` reads the MJX column from an
+earlier evaluation instead (not paired: its own robots).
+
+Robustness and cause-finding: --latency-ms, --noise, --push, --robot FILE.xml pass through to
+every episode (write each variant to its own --out).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import multiprocessing as mp
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from mjx_stairs import atomic  # noqa: E402
+from mjx_stairs.tools import sim2sim as s2s  # noqa: E402
+
+U_CELLS = tuple(("u_shaped", "test", lv) for lv in range(6))  # 0-based levels
+
+
+def cell_name(family: str, schedule: str, level: int) -> str:
+    return f"{family}_{schedule}_L{level + 1}"
+
+
+@functools.lru_cache(maxsize=8)
+def course_of(spec: tuple) -> s2s.Course:
+    """("family", family, schedule, level, variant, resolution, tile_size) or ("case", suite,
+    case name, resolution) -> the course (cached per worker process)."""
+    import terrains
+    from terrains.suites import load_suite
+
+    if spec[0] == "family":
+        _, fam, sched, lv, variant, res, size = spec
+        tile = terrains.make_tile(fam, lv, variant, sched, res, size)
+        return s2s.tile_course(tile, f"{cell_name(fam, sched, lv)}_{variant}")
+    _, suite, name, res = spec
+    (case,) = [c for c in load_suite(suite) if c.name == name]
+    return s2s.tile_course(case.tile(res), name)
+
+
+def run_task(task: tuple) -> tuple[str, list[dict]]:
+    """One chunk of a cell's episodes in a worker: (cell, records)."""
+    cell, spec, poses, options, onnx, robot = task
+    r = s2s.run(onnx, course_of(spec), s2s.Options(**options), robot=robot, start_poses=poses)
+    return cell, r["records"]
+
+
+def family_starts(policy_path: Path, episodes: int, seed: int, resolution: float,
+                  tile_size: float) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """{cell: [(variant, poses [n, 3] x, y, yaw in its tile frame)]}: `mjx-stairs eval`'s
+    starts of the U-shaped cells, grouped by the variant tile each robot is on."""
+    import terrains
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study.evaluate import CellSpec, cell_env, initial_states
+
+    spec = CellSpec(cells=U_CELLS, robots_per_cell=episodes, seed=seed, resolution=resolution,
+                    tile_size=tile_size)
+    env = cell_env(load_policy(policy_path), spec)
+    state = initial_states(env, spec)
+    qpos, tile = np.asarray(state.pipeline_state.qpos), np.asarray(state.info["tile"])
+    origin = np.asarray(env.tile_origin)
+    cols = len(origin) // len(U_CELLS)  # variants per cell
+    out: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for i, (fam, sched, lv) in enumerate(U_CELLS):
+        names = terrains.variants(fam)
+        rows = slice(i * episodes, (i + 1) * episodes)
+        groups = []
+        for col in range(cols):
+            mine = tile[rows] == i * cols + col
+            q = qpos[rows][mine]
+            yaw = 2 * np.arctan2(q[:, 6], q[:, 3])
+            xy = q[:, :2] - origin[i * cols + col]
+            groups.append((names[col % len(names)], np.column_stack([xy, yaw])))
+        out[cell_name(fam, sched, lv)] = groups
+    return out
+
+
+def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
+    """Every chunk of every cell not written yet."""
+    opts = dict(episode_s=args.episode_s, latency_ms=args.latency_ms, noise=args.noise,
+                push=args.push, seed=args.seed)
+    out = []
+
+    def chunks(cell, spec, poses):
+        for k in range(0, len(poses), args.chunk):
+            out.append((cell, spec, poses[k:k + args.chunk], {**opts, "seed": args.seed + k},
+                        str(onnx), args.robot))
+
+    if "u_shaped" in args.cells:
+        starts = family_starts(args.policy, args.episodes, args.seed, args.resolution, 10.0)
+        for (fam, sched, lv) in U_CELLS:
+            cell = cell_name(fam, sched, lv)
+            for variant, poses in ([] if cell in done else starts[cell]):
+                chunks(cell, ("family", fam, sched, lv, variant, args.resolution, 10.0), poses)
+    if "code" in args.cells:
+        from mjx_stairs.tools import contract as ct
+        from terrains.suites import load_suite
+
+        c = ct.load_contract(onnx)
+        for case in load_suite("code"):
+            if case.name in done:
+                continue
+            spec = ("case", "code", case.name, args.resolution)
+            chunks(case.name, spec, s2s.starts(course_of(spec), c, args.episodes, args.seed))
+    return out
+
+
+def mjx_column(args, out: Path) -> dict[str, float]:
+    """{cell: MJX success}: run here on the same starts (--mjx), or read (--mjx-json)."""
+    if args.mjx:
+        from mjx_stairs.rl.policy import load_policy
+        from mjx_stairs.study.evaluate import CellSpec, success_by_cell
+
+        path = out / "mjx.json"
+        if not path.exists():
+            spec = CellSpec(cells=U_CELLS, robots_per_cell=args.episodes, seed=args.seed,
+                            resolution=args.resolution)
+            r = success_by_cell({"policy": load_policy(args.policy)}, spec)["policy"]
+            atomic.write_text(path, json.dumps(r, indent=1) + "\n")
+        r = json.loads(path.read_text())
+    elif args.mjx_json:
+        r = json.loads(Path(args.mjx_json).read_text())
+        r = r["policies"][args.mjx_policy] if "policies" in r else r
+    else:
+        return {}
+    return {cell_name(c["family"], c["schedule"], c["level"] - 1): s
+            for c, s in zip(r["cells"], r["success"], strict=True)}
+
+
+def write_cell(out: Path, cell: str, records: list[dict], args) -> None:
+    records = sorted(records, key=lambda r: r["start"])
+    result = {"cell": cell, **s2s.summarise(records), "policy": str(args.policy),
+              "robot": args.robot or "go2_full.xml (ours)", "latency_ms": args.latency_ms,
+              "noise": args.noise, "push": args.push, "episode_s": args.episode_s,
+              "seed": args.seed, "resolution": args.resolution, "records": records}
+    atomic.write_text(out / "cells" / f"{cell}.json", json.dumps(result, indent=1) + "\n")
+
+
+def write_table(out: Path, mjx: dict[str, float]) -> None:
+    rows = ["| cell | episodes | sim2sim success | fell | MJX success | gap (MJX - sim2sim) "
+            "| trunk | hip | thigh | calf |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for f in sorted((out / "cells").glob("*.json")):
+        r = json.loads(f.read_text())
+        m, s = mjx.get(r["cell"]), r["success"]
+        e = r["edge_contacts_per_episode"]
+        ms, gap = ("–", "–") if m is None else (f"{100 * m:.1f}", f"{100 * (m - s):+.1f}")
+        rows.append(
+            f"| {r['cell']} | {r['episodes']} | {100 * s:.1f} | {100 * r['fell']:.1f} | {ms} | "
+            f"{gap} | " + " | ".join(f"{e[k]:.2f}" for k in ("trunk", "hip", "thigh", "calf"))
+            + " |")
+    rows.append("\nSuccess and falls in % of the episodes; trunk/hip/thigh/calf: touches of a "
+                "step edge per episode (mjx_stairs.tools.sim2sim).")
+    atomic.write_text(out / "table.md", "\n".join(rows) + "\n")
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--policy", type=Path, default=ROOT / "experiments/results/stage2_u/policy.npz")
+    p.add_argument("--out", type=Path, default=ROOT / "experiments/results/sim2sim/stage2_u")
+    p.add_argument("--cells", nargs="+", default=["u_shaped", "code"],
+                   choices=["u_shaped", "code"])
+    p.add_argument("--episodes", type=int, default=200, help="episodes per cell")
+    p.add_argument("--workers", type=int, default=16)
+    p.add_argument("--chunk", type=int, default=10, help="episodes per task")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--episode-s", type=float, default=20.0)
+    p.add_argument("--resolution", type=float, default=0.025)
+    p.add_argument("--latency-ms", type=float, default=0.0)
+    p.add_argument("--noise", action="store_true")
+    p.add_argument("--push", action="store_true")
+    p.add_argument("--robot", default=None, help="a Go2 MJCF (default: ours, full geometry)")
+    p.add_argument("--mjx", action="store_true", help="run the MJX evaluation of the same "
+                   "starts first (U-shaped cells; a GPU host)")
+    p.add_argument("--mjx-json", default=None, help="MJX success from an earlier evaluation")
+    p.add_argument("--mjx-policy", default="stage2_u", help="its policy name")
+    p.add_argument("--force", action="store_true", help="redo cells already written")
+    args = p.parse_args(argv)
+    out = args.out
+    (out / "cells").mkdir(parents=True, exist_ok=True)
+    onnx = out / "policy.onnx"
+    if args.force or not onnx.exists():
+        from mjx_stairs.tools import export
+
+        export.export(args.policy, onnx)
+    done = set() if args.force else {f.stem for f in (out / "cells").glob("*.json")}
+    mjx = mjx_column(args, out)
+    tasks = tasks_for(args, onnx, done)
+    left: dict[str, int] = {}
+    for t in tasks:
+        left[t[0]] = left.get(t[0], 0) + 1
+    got: dict[str, list[dict]] = {c: [] for c in left}
+    t0 = time.time()
+    print(f"{len(left)} cells, {len(tasks)} tasks, {args.workers} workers", flush=True)
+    with mp.get_context("spawn").Pool(args.workers) as pool:
+        for cell, records in pool.imap_unordered(run_task, tasks):
+            got[cell] += records
+            left[cell] -= 1
+            if left[cell] == 0:
+                write_cell(out, cell, got.pop(cell), args)
+                write_table(out, mjx)
+                print(f"{cell} done ({time.time() - t0:.0f} s)", flush=True)
+    write_table(out, mjx)
+    print((out / "table.md").read_text(), flush=True)
+
+
+if __name__ == "__main__":
+    main()
