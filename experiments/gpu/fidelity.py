@@ -53,6 +53,8 @@ def write(path: Path, record: dict) -> None:
 
 
 def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float) -> None:
+    """Every option on every cell; under JAX_ENABLE_X64=1 the physics runs in float64 (the
+    policy in float32) and each option is recorded as '<option>_x64'."""
     import jax
 
     from mjx_stairs.rl.policy import load_policy
@@ -64,9 +66,10 @@ def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float)
         spec = CellSpec(cells=tuple(cells), robots_per_cell=robots, env_overrides=OPTIONS[name],
                         resolution=res)
         result = success_by_cell(policies, spec)
-        record = {"option": name, "device": jax.devices()[0].device_kind,
+        tag = "_x64" if jax.config.jax_enable_x64 else ""
+        record = {"option": name + tag, "device": jax.devices()[0].device_kind,
                   "wall_s_with_compile": time.time() - t0, "policies": result}
-        write(out / f"mjx_{name}.json", record)
+        write(out / f"mjx_{name}{tag}.json", record)
         print(f"[fidelity] {name}: {time.time() - t0:.0f} s", flush=True)
         for p, r in result.items():
             print(p, name, [round(100 * s, 1) for s in r["success"]], flush=True)

@@ -178,15 +178,16 @@ class StairEnv(Env):
             "air_time": jnp.zeros(4),
             "last_foot_contact": jnp.zeros(4, bool),
             "success_count": jnp.zeros((), jnp.int32),
-            "success": jnp.zeros(()),
-            "truncation": jnp.zeros(()),
+            "success": jnp.zeros((), jnp.float32),
+            "truncation": jnp.zeros((), jnp.float32),
             **draws,
         }
         k_noise, info["rng"] = jax.random.split(info["rng"])
         obs = self.observe(qpos, data.qvel, info, k_noise)
         info["final_obs"] = obs
-        metrics = {k: jnp.zeros(()) for k in self.metric_names()}
-        return State(data, obs, jnp.zeros(()), jnp.zeros(()), metrics, info)
+        metrics = {k: jnp.zeros((), jnp.float32) for k in self.metric_names()}
+        zero = jnp.zeros((), jnp.float32)  # float32 also when the physics runs in float64
+        return State(data, obs, zero, zero, metrics, info)
 
     def _spawn_robot(self, rng: jax.Array, tile: jnp.ndarray) -> tuple[jnp.ndarray, dict]:
         """qpos [19] on the tile's spawn area and this episode's randomisation draws."""
@@ -230,7 +231,9 @@ class StairEnv(Env):
         data, obs, info = self._auto_reset(data, info, final_obs, ends, moved_up, k_reset)
         metrics = endings.metrics(terms, ends, finite, level, self.num_levels - 1,
                                   q.planar_goal_distance, moved_up)
-        return State(data, obs, reward, ends.done.astype(jnp.float32), metrics, info)
+        metrics = {k: v.astype(jnp.float32) for k, v in metrics.items()}  # also under x64
+        return State(data, obs, reward.astype(jnp.float32), ends.done.astype(jnp.float32),
+                     metrics, info)
 
     def _actuate(self, data0: mjx.Data, action: jnp.ndarray,
                  info: dict) -> tuple[mjx.Data, jnp.ndarray]:

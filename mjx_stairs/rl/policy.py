@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from mjx_stairs.config import ConfigError, from_dict, to_dict
@@ -109,7 +110,9 @@ def load_policy(path: str | Path) -> Policy:
 
 
 def policy_action(policy: Policy, obs: jax.Array, rng: jax.Array | None = None) -> jax.Array:
-    """Action for raw actor obs [..., D]: the mean, or a sample when ``rng`` is given."""
+    """Action for raw actor obs [..., D]: the mean, or a sample when ``rng`` is given. The policy
+    computes in float32 whatever precision the physics ran in (float64 evaluations)."""
+    obs = obs.astype(jnp.float32)
     mean = ppo.policy_mean(policy.params, policy.normalizer, obs, policy.network, policy.layout)
     if rng is None:
         return mean
