@@ -371,8 +371,19 @@ def _add_tools(sub) -> None:
     sim2sim_cli.add_parser(sub)
 
 
+def _glued_poses(argv: list[str]) -> list[str]:
+    """"--start -1,2" -> "--start=-1,2": argparse takes a value starting with '-' for a flag."""
+    out: list[str] = []
+    for a in argv:
+        if out and out[-1] in ("--start", "--goal") and a[:1] == "-" and a[1:2] in "0123456789.":
+            out[-1] += "=" + a
+        else:
+            out.append(a)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(_glued_poses(sys.argv[1:] if argv is None else argv))
     t0 = time.time()
     try:
         code = args.fn(args)

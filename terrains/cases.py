@@ -172,7 +172,7 @@ def _pose(v, name: str) -> tuple[float, float, float | None]:
     vals = [float(x) for x in v]
     if len(vals) not in (2, 3, 4) or not np.isfinite(vals).all():
         raise ValueError(f"{name} must be [x, y], [x, y, yaw] or [x, y, z, yaw], got {v!r}")
-    return vals[0], vals[1], {2: None, 3: vals[2], 4: vals[-1]}[len(vals)]
+    return vals[0], vals[1], vals[-1] if len(vals) > 2 else None
 
 
 def read_case_folder(folder: str | os.PathLike, resolution: float = 0.025,
