@@ -33,10 +33,12 @@ def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> EnvConfig:
     return env_config_from(saved_config(policy, "env"), overrides)
 
 
-def eval_env(policy: Policy, atlas: Any, spec: EvalSpec | CellSpec) -> StairEnv:
-    """The evaluation env of `policy` on `atlas`: the one place that decides it. The policy's
-    trained env config with `spec.env_overrides` applied, in evaluation settings (no noise, no
-    randomisation, no trunk-contact ending, no curriculum), episodes of `spec.episode_length_s`."""
+def eval_env(policy: Policy, atlas: Any, spec: Any) -> StairEnv:
+    """The evaluation env of `policy` on `atlas`: the one place that decides it (for eval,
+    transfer, exp1, cells, cases, the critic map and play). The policy's trained env config with
+    `spec.env_overrides` applied, in evaluation settings (no noise, no randomisation, no
+    trunk-contact ending, no curriculum), episodes of `spec.episode_length_s`; `spec` is an
+    EvalSpec, CellSpec or tools' PlaySpec."""
     cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
     return StairEnv(atlas, cfg)
 

@@ -39,9 +39,9 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mjx_stairs.atomic import atomic_path  # noqa: E402
-from mjx_stairs.env.config import env_config_from, evaluation_config  # noqa: E402
 from mjx_stairs.env.stair_env import StairEnv  # noqa: E402
-from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config  # noqa: E402
+from mjx_stairs.rl.policy import Policy, load_policy, policy_action  # noqa: E402
+from mjx_stairs.study.evaluate import eval_env  # noqa: E402
 from mjx_stairs.tools.specs import PlaySpec  # noqa: E402
 
 
@@ -129,9 +129,7 @@ def make_play_env(policy: Policy, spec: PlaySpec, case: tuple[str, Any] | None =
                                      spec.resolution, spec.tile_size, spec.border)
     else:
         atlas = terrains.build_tile_atlas([[case[1]]], spec.border)
-    cfg = evaluation_config(env_config_from(saved_config(policy, "env")),
-                            spec.episode_length_s)
-    env = StairEnv(atlas, cfg)
+    env = eval_env(policy, atlas, spec)  # the evaluation env, decided where eval decides it
     n = env.observation_size["state"][0]
     if policy.layout.obs_size != n or tuple(policy.layout.map_shape) != env.map_shape:
         raise ValueError(
