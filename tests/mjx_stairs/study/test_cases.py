@@ -144,3 +144,18 @@ def test_case_record_counts_timeouts_and_time_to_goal():
     r = case_record("a", T(), s, ~s, np.array([10, 20, -1, -1]), 0.02)
     assert (r["success"], r["fell"], r["timeout"]) == (0.5, 0.5, 0.0)
     assert r["mean_time_to_goal_s"] == pytest.approx(0.3)
+
+
+def test_eval_direction_down_walks_the_family_from_the_top():
+    """eval --direction down: the same tiles, robots spawned on the top landing, goal below."""
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study.evaluate import make_eval_env
+    from mjx_stairs.study.specs import EvalSpec
+
+    policy = load_policy(POLICY)
+    up, _ = make_eval_env(policy, EvalSpec(levels=(2,), resolution=0.1))
+    down, _ = make_eval_env(policy, EvalSpec(levels=(2,), resolution=0.1, direction="down"))
+    np.testing.assert_array_equal(down.terrain.heights(), up.terrain.heights())
+    spawn, goal = np.asarray(down.tiles.spawn), np.asarray(down.tiles.goal)
+    assert (spawn[:, 2] > goal[:, 2] + 1.0).all()
+    np.testing.assert_allclose(spawn[:, 2], np.asarray(up.tiles.goal)[:, 2])
