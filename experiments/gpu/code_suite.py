@@ -16,6 +16,8 @@ Steps, each writing JSON under OUT as soon as it is complete and skipped when it
          whose JSON carries the procedural route and spawn area (OUT/u3_case_<policy>.json)
   alone  stage2_u on four code cases one at a time (OUT/code_alone_stage2_u.json), to compare
          with the same cases in code_stage2_u.json
+  table  (no GPU) OUT/code_suite.md from the files present: success / falls per case and policy,
+         the U level 3 comparison and the together-or-alone comparison
 Every evaluation runs in the evaluation env of mjx_stairs.study.evaluate.eval_env, with --env
 added (the default: the reference physics, in which every published number is measured).
 """
@@ -130,10 +132,53 @@ def run_mesh(out: Path, spec) -> None:
             write(path, facts(spec, t0, policy=str(POLICIES[name]), results=recs))
 
 
+def write_table(out: Path) -> None:
+    """Long: three markdown tables, each only from the files present."""
+    from mjx_stairs.atomic import write_text
+
+    runs = {p.stem[len("code_"):]: json.loads(p.read_text())
+            for p in sorted(out.glob("code_*.json")) if p.stem != "code_alone_stage2_u"}
+    lines = []
+    if runs:
+        first = next(iter(runs.values()))
+        lines += [f"Success / falls in % of {first['robots_per_case']} robots per case, one "
+                  f"{first['episode_length_s']:g} s episode, env {first['env_overrides']}, "
+                  f"{first['device']}.", "",
+                  "| case | " + " | ".join(runs) + " |", "|---|" + "---|" * len(runs)]
+        for i, rec in enumerate(first["results"]):
+            cells = [f"{100 * r['results'][i]['success']:.1f} / {100 * r['results'][i]['fell']:.1f}"
+                     for r in runs.values()]
+            lines.append(f"| {rec['name']} | " + " | ".join(cells) + " |")
+    u3 = []
+    for name in MESH_POLICIES:
+        got = {k: out / f"u3_{k}_{name}.json" for k in ("family", "mesh", "case")}
+        if all(p.exists() for p in got.values()):
+            fam = json.loads(got["family"].read_text())["result"]
+            m, c = (json.loads(got[k].read_text())["results"][0] for k in ("mesh", "case"))
+            u3.append(f"| {name} | {100 * fam['success'][0]:.1f} | {100 * m['success']:.1f} | "
+                      f"{100 * c['success']:.1f} |")
+    if u3:
+        lines += ["", "U-shaped test level 3, success in %: eval --family (left and right), "
+                  "eval --mesh of the exported left tile (importer's route), eval --suite of it "
+                  "(procedural route and spawn)", "", "| policy | family | mesh | case |",
+                  "|---|---|---|---|", *u3]
+    alone = out / "code_alone_stage2_u.json"
+    if alone.exists() and "stage2_u" in runs:
+        together = {r["name"]: r for r in runs["stage2_u"]["results"]}
+        lines += ["", "stage2_u, success / falls in %: the case in the suite's atlas, alone", "",
+                  "| case | together | alone |", "|---|---|---|"]
+        for r in json.loads(alone.read_text())["results"]:
+            t = together[r["name"]]
+            lines.append(f"| {r['name']} | {100 * t['success']:.1f} / {100 * t['fell']:.1f} | "
+                         f"{100 * r['success']:.1f} / {100 * r['fell']:.1f} |")
+    write_text(out / "code_suite.md", "\n".join(lines) + "\n")
+    print("\n".join(lines), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
-    ap.add_argument("--steps", default="suite,mesh,alone")
+    ap.add_argument("--steps", default="suite,mesh,alone,table")
     ap.add_argument("--policies", default=",".join(POLICIES), help="for the suite step")
     ap.add_argument("--robots", type=int, default=1000, help="robots per case")
     ap.add_argument("--episode-s", type=float, default=30.0)
@@ -155,7 +200,8 @@ def main() -> None:
     t0 = time.time()
     for step, fn in (("suite", lambda: run_suite(a.out, names, spec)),
                      ("mesh", lambda: run_mesh(a.out, spec)),
-                     ("alone", lambda: run_alone(a.out, spec))):
+                     ("alone", lambda: run_alone(a.out, spec)),
+                     ("table", lambda: write_table(a.out))):
         if step in steps:
             fn()
             print(f"[code_suite] {step} done at {time.time() - t0:.0f} s", flush=True)
