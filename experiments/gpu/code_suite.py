@@ -11,9 +11,10 @@ Steps, each writing JSON under OUT as soon as it is complete and skipped when it
 (so a command cut short is continued by running it again):
   suite  every policy on the code suite: OUT/code_<policy>.json (one record per case)
   mesh   U-shaped test level 3 (left) exported to STL, then for stage2_u and stage2_u_lean:
-         eval --family u_shaped --levels 3 (OUT/u3_family_<policy>.json), eval --mesh with the
-         importer's route (OUT/u3_mesh_<policy>.json) and eval --suite of the exported case,
-         whose JSON carries the procedural route and spawn area (OUT/u3_case_<policy>.json)
+         eval --family u_shaped --levels 3 (the same starts, left and right tiles;
+         OUT/u3_family_<policy>.json), eval --mesh with the importer's route
+         (OUT/u3_mesh_<policy>.json) and eval --suite of the exported case, whose JSON carries
+         the procedural route and spawn area (OUT/u3_case_<policy>.json)
   alone  stage2_u on four code cases one at a time (OUT/code_alone_stage2_u.json), to compare
          with the same cases in code_stage2_u.json
   table  (no GPU) OUT/code_suite.md from the files present: success / falls per case and policy,
@@ -25,7 +26,6 @@ added (the default: the reference physics, in which every published number is me
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -62,18 +62,18 @@ def facts(spec, t0: float, **extra) -> dict:
 
 
 def run_suite(out: Path, names: list[str], spec) -> None:
+    """Policies that share an evaluation env share one compiled program (cases.by_env)."""
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study import cases
 
     code = cases.suite_cases("code", spec.resolution)
-    for name in names:
-        path = out / f"code_{name}.json"
-        if path.exists():
-            continue
+    todo = {n: load_policy(POLICIES[n]) for n in names if not (out / f"code_{n}.json").exists()}
+    for group in cases.by_env(todo, spec) if todo else []:
         t0 = time.time()
-        recs = cases.success_by_case({name: load_policy(POLICIES[name])}, code, spec)[name]
-        print(f"\n{name}, code suite\n" + cases.case_table(recs), flush=True)
-        write(path, facts(spec, t0, policy=str(POLICIES[name]), suite="code", results=recs))
+        for name, recs in cases.success_by_case(group, code, spec).items():
+            print(f"\n{name}, code suite\n" + cases.case_table(recs), flush=True)
+            write(out / f"code_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                   suite="code", results=recs))
 
 
 def run_alone(out: Path, spec) -> None:
@@ -104,32 +104,36 @@ def export_u3(out: Path, resolution: float) -> Path:
 
 
 def run_mesh(out: Path, spec) -> None:
-    """Long: one family, one mesh and one case evaluation per policy, each to its own file."""
+    """The family (evaluate.success_by_cell: the starts of eval --family), the mesh and the
+    case, each one program for both policies."""
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study import cases, evaluate
 
     folder = export_u3(out, spec.resolution)
     rec = json.loads((folder / "u3.json").read_text())
-    for name in MESH_POLICIES:
-        policy = load_policy(POLICIES[name])
-        path = out / f"u3_family_{name}.json"
-        if not path.exists():
-            t0 = time.time()
-            fam = dataclasses.replace(spec, family="u_shaped", schedule="test", levels=(2,))
-            r = evaluate.success_by_level(policy, fam)
+    policies = {n: load_policy(POLICIES[n]) for n in MESH_POLICIES}
+    if not all((out / f"u3_family_{n}.json").exists() for n in policies):
+        t0 = time.time()
+        cell = evaluate.CellSpec(cells=(("u_shaped", "test", 2),),
+                                 robots_per_cell=spec.robots_per_level,
+                                 episode_length_s=spec.episode_length_s, seed=spec.seed,
+                                 resolution=spec.resolution, env_overrides=spec.env_overrides)
+        for name, r in evaluate.success_by_cell(policies, cell).items():
             print(f"{name} eval --family u_shaped --levels 3: {100 * r['success'][0]:.1f} %")
-            write(path, facts(spec, t0, policy=str(POLICIES[name]), result=r))
-        for kind, found in (("mesh", lambda: cases.mesh_cases(
-                folder / "u3.stl", rec["start"][:2], rec["goal"][:2], None, spec.resolution)),
-                            ("case", lambda: cases.suite_cases(str(folder), spec.resolution))):
-            path = out / f"u3_{kind}_{name}.json"
-            if path.exists():
-                continue
-            t0 = time.time()
-            recs = cases.success_by_case({name: policy}, found(), spec)[name]
+            write(out / f"u3_family_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                         result=r))
+    found = {"mesh": lambda: cases.mesh_cases(folder / "u3.stl", rec["start"][:2],
+                                              rec["goal"][:2], None, spec.resolution),
+             "case": lambda: cases.suite_cases(str(folder), spec.resolution)}
+    for kind, make in found.items():
+        if all((out / f"u3_{kind}_{n}.json").exists() for n in policies):
+            continue
+        t0 = time.time()
+        for name, recs in cases.success_by_case(policies, make(), spec).items():
             print(f"{name} eval --{'mesh' if kind == 'mesh' else 'suite'} u3\n"
                   + cases.case_table(recs), flush=True)
-            write(path, facts(spec, t0, policy=str(POLICIES[name]), results=recs))
+            write(out / f"u3_{kind}_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                         results=recs))
 
 
 def write_table(out: Path) -> None:
@@ -153,7 +157,7 @@ def write_table(out: Path) -> None:
     for name in MESH_POLICIES:
         got = {k: out / f"u3_{k}_{name}.json" for k in ("family", "mesh", "case")}
         if all(p.exists() for p in got.values()):
-            fam = json.loads(got["family"].read_text())["result"]
+            fam = json.loads(got["family"].read_text())["result"]  # a cell record
             m, c = (json.loads(got[k].read_text())["results"][0] for k in ("mesh", "case"))
             u3.append(f"| {name} | {100 * fam['success'][0]:.1f} | {100 * m['success']:.1f} | "
                       f"{100 * c['success']:.1f} |")

@@ -130,7 +130,7 @@ def evaluate_cases(checkpoints: Sequence[str | os.PathLike], cases: Sequence[Cas
     to ``out`` atomically: {"results": [record per checkpoint and case], ...run facts}."""
     policies = {str(p): load_policy(p) for p in checkpoints}
     records = []
-    for group in _by_env(policies, spec):
+    for group in by_env(policies, spec):
         for ck, recs in success_by_case(group, cases, spec).items():
             print(f"\n{_label(ck)}\n" + case_table(recs), flush=True)
             records += [{"checkpoint": ck, **r} for r in recs]
@@ -146,7 +146,7 @@ def evaluate_cases(checkpoints: Sequence[str | os.PathLike], cases: Sequence[Cas
     return result
 
 
-def _by_env(policies: dict[str, Policy], spec: EvalSpec) -> list[dict[str, Policy]]:
+def by_env(policies: dict[str, Policy], spec: EvalSpec) -> list[dict[str, Policy]]:
     """The policies grouped by their evaluation env config (in order of first appearance)."""
     groups: list[tuple[Any, dict[str, Policy]]] = []
     for name, p in policies.items():
