@@ -129,10 +129,42 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     return 0
 
 
+def mesh_flags(parser: argparse.ArgumentParser, suite: bool = False) -> None:
+    """--mesh FILE --start --goal [--route] (and --suite): a staircase other than a family's."""
+    parser.add_argument("--mesh", default=None, help="a staircase mesh (STL, OBJ, PLY; metres, "
+                        "z up) in place of a family")
+    parser.add_argument("--start", default=None, metavar="X,Y[,YAW]",
+                        help="with --mesh: the spawn, mesh frame (m, rad)")
+    parser.add_argument("--goal", default=None, metavar="X,Y[,YAW]",
+                        help="with --mesh: the goal, mesh frame")
+    parser.add_argument("--route", default=None, metavar="FILE.csv",
+                        help="with --mesh: the route the waypoint follows, x,y per line, mesh "
+                        "frame (default: the importer's path, kept in the middle)")
+    if suite:
+        parser.add_argument("--suite", default=None, metavar="DIR|NAME",
+                            help="a folder of cases (NAME.json beside its mesh) or a fixed "
+                            "suite: code, paper (every case up and down)")
+
+
+def mesh_cases(args: argparse.Namespace, resolution: float) -> list | None:
+    """The cases that --mesh or --suite name (study.cases.from_flags), None for neither."""
+    from mjx_stairs.study import cases
+
+    return cases.from_flags(args.mesh, args.start, args.goal, args.route,
+                            getattr(args, "suite", None), resolution)
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from mjx_stairs.study import evaluate
 
-    evaluate.evaluate(args.checkpoint, args.families, spec_from(EvalSpec, args), args.out)
+    spec = spec_from(EvalSpec, args)
+    found = mesh_cases(args, spec.resolution)
+    if found is None:
+        evaluate.evaluate(args.checkpoint, args.families, spec, args.out)
+        return 0
+    from mjx_stairs.study import cases
+
+    cases.evaluate_cases(args.checkpoint, found, spec, args.out, source=args.mesh or args.suite)
     return 0
 
 
@@ -140,11 +172,17 @@ def cmd_critic_map(args: argparse.Namespace) -> int:
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study import critic_map, plots
 
+    found = mesh_cases(args, args.resolution)
     policy = load_policy(args.checkpoint)
-    m = critic_map.critic_map(
-        policy, args.family, args.level - 1, args.variant, resolution=args.resolution
-    )
-    plots.plot_critic_map(m, args.out, f"critic value, {args.family} test level {args.level}")
+    if found is not None:
+        m = critic_map.critic_map_of_tile(policy, found[0][1], EvalSpec(
+            robots_per_level=1, resolution=args.resolution))
+        title = f"critic value, {found[0][0]}"
+    else:
+        m = critic_map.critic_map(policy, args.family, args.level - 1, args.variant,
+                                  resolution=args.resolution)
+        title = f"critic value, {args.family} test level {args.level}"
+    plots.plot_critic_map(m, args.out, title)
     print(f"wrote {args.out}")
     return 0
 
@@ -177,16 +215,11 @@ def cmd_terrain(args: argparse.Namespace) -> int:
 def cmd_play(args: argparse.Namespace) -> int:
     from mjx_stairs.tools import play
 
+    spec = spec_from(PlaySpec, args)
+    found = mesh_cases(args, spec.resolution)
     try:
-        play.play(
-            args.checkpoint,
-            spec_from(PlaySpec, args),
-            video=args.video,
-            mcap=args.mcap,
-            width=args.width,
-            height=args.height,
-            fps=args.fps,
-        )
+        play.play(args.checkpoint, spec, video=args.video, mcap=args.mcap, width=args.width,
+                  height=args.height, fps=args.fps, case=None if found is None else found[0])
     except play.RenderError as e:
         print(f"mjx-stairs play: error: {e}", file=sys.stderr)
         return 2
@@ -249,7 +282,9 @@ def _add_train_and_eval(sub) -> None:
     e.add_argument("--family", nargs="+", dest="families", default=["u_shaped"],
                    help="stair families")
     add_spec_flags(e, EvalSpec, exclude=("family",))
-    e.add_argument("--out", default=None, help="directory for results.json and results.md")
+    mesh_flags(e, suite=True)
+    e.add_argument("--out", default=None, help="families: directory for results.json and "
+                   "results.md; --mesh / --suite: the JSON file (one record per case)")
     e.set_defaults(fn=cmd_eval)
 
     c = sub.add_parser("critic-map", help="the critic's value over a tile (paper Fig. 4)")
@@ -258,6 +293,7 @@ def _add_train_and_eval(sub) -> None:
     c.add_argument("--level", type=int, default=3, help="1-based test level")
     c.add_argument("--variant", type=int, default=0)
     c.add_argument("--resolution", type=float, default=0.025)
+    mesh_flags(c)
     c.add_argument("--out", required=True, help="PNG path")
     c.set_defaults(fn=cmd_critic_map)
 
@@ -278,7 +314,8 @@ def _add_studies(sub) -> None:
     x.add_argument(
         "--ablation", default=None, help="stage-2 policy trained without the stall penalty"
     )
-    add_spec_flags(x, EvalSpec, exclude=("family", "schedule", "levels", "env_overrides"))
+    add_spec_flags(x, EvalSpec, exclude=("family", "schedule", "levels", "env_overrides",
+                                         "direction"))
     x.add_argument("--out", required=True, help="output directory")
     x.set_defaults(fn=cmd_exp1_report)
 
@@ -316,6 +353,7 @@ def _add_tools(sub) -> None:
     pl = sub.add_parser("play", help="roll out a policy: mp4 video and/or MCAP for Foxglove")
     pl.add_argument("--checkpoint", required=True, help="policy.npz")
     add_spec_flags(pl, PlaySpec)
+    mesh_flags(pl)
     pl.add_argument("--video", default=None, help="mp4 path (robot 0, tracking camera)")
     pl.add_argument("--mcap", default=None, help="MCAP path (all robots)")
     pl.add_argument("--width", type=int, default=640)
@@ -333,8 +371,19 @@ def _add_tools(sub) -> None:
     sim2sim_cli.add_parser(sub)
 
 
+def _glued_poses(argv: list[str]) -> list[str]:
+    """"--start -1,2" -> "--start=-1,2": argparse takes a value starting with '-' for a flag."""
+    out: list[str] = []
+    for a in argv:
+        if out and out[-1] in ("--start", "--goal") and a[:1] == "-" and a[1:2] in "0123456789.":
+            out[-1] += "=" + a
+        else:
+            out.append(a)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(_glued_poses(sys.argv[1:] if argv is None else argv))
     t0 = time.time()
     try:
         code = args.fn(args)

@@ -25,6 +25,7 @@ from .tile import (
     Tile,
     atomic_savez,
     load_npz,
+    pad_tile,
 )
 
 _TABLES = ("origin", "spawn", "goal", "centreline", "level", "family", "variant",
@@ -196,6 +197,26 @@ def build_cell_atlas(cells: Sequence[tuple[str, str, int]], variants_per_cell: i
                      variant_names=(tuple(f"v{c}" for c in range(variants_per_cell)),))
 
 
+def build_tile_atlas(rows: Sequence[Sequence[Tile]], border: float = 2.0,
+                     points: int | None = None) -> Atlas:
+    """Any tiles, one row of the atlas per entry of ``rows`` (equal lengths), of one resolution
+    but of any sizes: every tile is padded with wall to the largest (or to ``points`` points a
+    side; tile.pad_tile), so a staircase bigger than the usual tile is not cropped. One family,
+    "tiles" (index 0): a robot of row r is placed with ``level=r, family=0``."""
+    rows = [list(r) for r in rows]
+    if not rows or not rows[0] or len({len(r) for r in rows}) != 1:
+        raise ValueError("build_tile_atlas needs rows of tiles of equal, non-zero lengths")
+    resolution = float(rows[0][0].resolution)
+    if any(abs(t.resolution - resolution) > 1e-9 for r in rows for t in r):
+        raise ValueError("build_tile_atlas: the tiles have different resolutions")
+    _check_border(border, resolution)
+    n = max(max(t.heights.shape) for r in rows for t in r) if points is None else int(points)
+    grid = [[(pad_tile(t, n), 0, c) for c, t in enumerate(r)] for r in rows]
+    return _assemble(grid, resolution, n * resolution, border, families=("tiles",),
+                     schedule="tiles", variant_names=(tuple(f"v{c}" for c in
+                                                            range(len(rows[0]))),))
+
+
 def _check_border(border: float, resolution: float) -> None:
     if border < 0:
         raise ValueError(f"border must be >= 0, got {border}")
@@ -246,4 +267,4 @@ def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> Non
     tabs["direction"].append(0 if tile.direction == "up" else 1)
 
 
-__all__ = ["Atlas", "build_atlas", "build_cell_atlas", "FAMILIES"]
+__all__ = ["Atlas", "build_atlas", "build_cell_atlas", "build_tile_atlas", "FAMILIES"]

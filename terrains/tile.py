@@ -11,7 +11,7 @@ import json
 import os
 import tempfile
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -199,6 +199,40 @@ def flat_half(heights: np.ndarray, walls: np.ndarray, resolution: float, xy) -> 
             break
         best = float(half)
     return best
+
+
+def wall_height(tile: Tile) -> float:
+    """The height padding takes: WALL_RISE above the highest walkable point, at least the
+    tile's highest point."""
+    walkable = tile.heights[~tile.walls] if (~tile.walls).any() else tile.heights
+    return float(quantise(max(float(tile.heights.max()), float(walkable.max()) + WALL_RISE)))
+
+
+def pad_tile(tile: Tile, points: int) -> Tile:
+    """``tile`` in the middle of a square of ``points`` x ``points`` grid points, the rest wall
+    (wall_height). Spawn, goal, centre-line and ``spec["origin"]`` follow the shift; a square
+    tile of that size is returned as it is."""
+    ny, nx = tile.heights.shape
+    if points < max(ny, nx):
+        raise ValueError(f"cannot pad a {nx} x {ny} tile into {points} x {points} points")
+    if (ny, nx) == (points, points):
+        return tile
+    oy, ox = (points - ny) // 2, (points - nx) // 2
+    h = np.full((points, points), wall_height(tile), np.float32)
+    walls = np.ones((points, points), bool)
+    h[oy:oy + ny, ox:ox + nx] = tile.heights
+    walls[oy:oy + ny, ox:ox + nx] = tile.walls
+    shift = np.array([ox, oy], np.float64) * tile.resolution
+    spawn, goal, line = tile.spawn.copy(), tile.goal.copy(), tile.centreline.copy()
+    spawn[:2] += shift
+    goal[:2] += shift
+    line[:, :2] += shift
+    spec = dict(tile.spec)
+    if "origin" in spec:
+        spec["origin"] = (np.asarray(spec["origin"], np.float64) - shift).tolist()
+    spec["padded_by"] = [int(ox), int(oy)]
+    return replace(tile, heights=h, walls=walls, spawn=spawn, goal=goal, centreline=line,
+                   spec=spec)
 
 
 # ---------------------------------------------------------------------- npz helpers

@@ -8,12 +8,13 @@
 # (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean (the lean physics and its
 # check in the reference physics), straight-lean, l-shaped-lean, spiral-lean, transfer-lean
 # (Tables 1-2), bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml),
-# eval-committed (committed policies in the reference physics), pack. Each training step stops and
-# checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
-# policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
-# the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
-# carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
-# stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command.
+# eval-committed (committed policies in the reference physics), code-suite (issue 23: the code
+# suite baseline), pack. Each training step stops and checkpoints before DEADLINE_S seconds after
+# the script started, and leaves in $OUT/<name>/ the policy, metrics, run facts and a packed
+# state.npz (~11 MB for 4096 robots). To continue a run in the next command, copy that state.npz
+# and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl. Stage 2 starts
+# from experiments/results/stage1/policy.npz: commit the stage-1 policy there first. TRAIN_ARGS
+# (key=value ...) is added to every training command.
 set -uo pipefail
 T0=$(date +%s)
 DEADLINE=$1; shift
@@ -114,6 +115,12 @@ for step in "$@"; do
         python3 -m mjx_stairs eval --checkpoint "experiments/results/$name/policy.npz" \
           --robots 1000 --env $REFERENCE --out "$OUT/eval/$name" 2>&1 | grep -v warp
       done ;;
+    # issue 23: the committed policies on the code suite (up and down, 1000 robots per case), and
+    # eval --mesh against eval --family on U-shaped test level 3; CODE_SUITE_ARGS (e.g. --steps
+    # suite --policies stage1,stage2_u) picks a part; finished files are kept when re-run
+    code-suite)
+      python3 experiments/gpu/code_suite.py "$OUT/code_suite" ${CODE_SUITE_ARGS:-} 2>&1 \
+        | grep -v warp ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out

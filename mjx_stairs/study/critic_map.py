@@ -9,7 +9,7 @@ import numpy as np
 from mjx_stairs.env.geometry import yaw_quat
 from mjx_stairs.rl.policy import Policy, policy_value
 from mjx_stairs.sim.robot import NOMINAL_BASE_HEIGHT, NOMINAL_JOINT_POS
-from mjx_stairs.study.evaluate import EvalSpec, make_eval_env
+from mjx_stairs.study.evaluate import EvalSpec, eval_env, make_eval_env
 
 
 def critic_map(
@@ -22,7 +22,26 @@ def critic_map(
     resolution: float = 0.025,
     tile_size: float = 10.0,
 ) -> dict[str, np.ndarray]:
-    """The critic's value over a tile's x-y grid (the paper's Figure 4).
+    """The critic's value over a family's tile (the paper's Figure 4): `family` at 0-based
+    `level` of `schedule`, `variant` (0 or 1); see values_on_tile."""
+    spec = EvalSpec(family=family, schedule=schedule, levels=(level,), robots_per_level=1,
+                    resolution=resolution, tile_size=tile_size)
+    env, _ = make_eval_env(policy, spec)
+    return values_on_tile(policy, env, variant, spacing)
+
+
+def critic_map_of_tile(policy: Policy, tile, spec: EvalSpec,
+                       spacing: float = 0.1) -> dict[str, np.ndarray]:
+    """The critic's value over any terrains.Tile (e.g. an imported mesh), in the evaluation
+    env that `spec` decides; see values_on_tile."""
+    import terrains
+
+    env = eval_env(policy, terrains.build_tile_atlas([[tile]]), spec)
+    return values_on_tile(policy, env, 0, spacing)
+
+
+def values_on_tile(policy: Policy, env, tile: int, spacing: float = 0.1) -> dict[str, np.ndarray]:
+    """The critic's value over the x-y grid of atlas tile `tile` of `env`.
 
     At each grid point the robot stands upright at its nominal height above the terrain, faces
     along the nearest centre-line segment, velocities and last action zero; it sees the local
@@ -32,16 +51,8 @@ def critic_map(
 
     Long: the grid, its observations, the values and the tile around them, in order.
     """
-    spec = EvalSpec(
-        family=family,
-        schedule=schedule,
-        levels=(level,),
-        robots_per_level=1,
-        resolution=resolution,
-        tile_size=tile_size,
-    )
-    env, _ = make_eval_env(policy, spec)
-    tile = variant
+    resolution = env.resolution
+    tile_size = float(env.tiles.hi[tile][0] - env.tiles.lo[tile][0]) + resolution
     ox, oy = (float(v) for v in env.tile_origin[tile])
     xs = np.arange(ox + 0.2, ox + tile_size - 0.2 + 1e-9, spacing)
     ys = np.arange(oy + 0.2, oy + tile_size - 0.2 + 1e-9, spacing)
@@ -73,7 +84,7 @@ def critic_map(
     # Walls are not walkable: leave them blank (above the goal landing by more than a riser).
     ground = np.asarray(jax.jit(env.terrain_height)(jnp.asarray(gx), jnp.asarray(gy)))
     goal = np.asarray(env.tiles.goal[tile])
-    goal_z = float(goal[2])
+    goal_z = float(max(goal[2], env.tiles.spawn[tile][2]))
     values = np.where(ground > goal_z + 0.3, np.nan, values)
     n = int(round(tile_size / resolution))
     i0, j0 = int(round(oy / resolution)), int(round(ox / resolution))

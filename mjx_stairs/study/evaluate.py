@@ -24,7 +24,6 @@ from mjx_stairs import atomic
 from mjx_stairs.env.config import EnvConfig, env_config_from, evaluation_config
 from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config
-from mjx_stairs.study.experiment import TerrainConfig, build_atlas
 from mjx_stairs.study.specs import EvalSpec
 
 
@@ -34,39 +33,49 @@ def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> EnvConfig:
     return env_config_from(saved_config(policy, "env"), overrides)
 
 
+def eval_env(policy: Policy, atlas: Any, spec: Any) -> StairEnv:
+    """The evaluation env of `policy` on `atlas`: the one place that decides it (for eval,
+    transfer, exp1, cells, cases, the critic map and play). The policy's trained env config with
+    `spec.env_overrides` applied, in evaluation settings (no noise, no randomisation, no
+    trunk-contact ending, no curriculum), episodes of `spec.episode_length_s`; `spec` is an
+    EvalSpec, CellSpec or tools' PlaySpec."""
+    cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
+    return StairEnv(atlas, cfg)
+
+
 def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[StairEnv, Any]:
-    """An evaluation env over an atlas of the spec's family: rows = levels, 2 columns."""
+    """An evaluation env over an atlas of the spec's family: rows = levels, 2 columns, walked
+    `spec.direction`."""
     import terrains
 
     levels = list(spec.levels) or list(range(len(terrains.levels(spec.family, spec.schedule))))
-    atlas = build_atlas(
-        TerrainConfig(
-            families=(spec.family,),
-            schedule=spec.schedule,
-            levels=tuple(levels),
-            variants_per_family=2,
-            resolution=spec.resolution,
-            tile_size=spec.tile_size,
-        )
-    )
-    cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
-    return StairEnv(atlas, cfg), levels
+    atlas = terrains.build_atlas([spec.family], spec.schedule, levels, variants_per_family=2,
+                                 resolution=spec.resolution, tile_size=spec.tile_size,
+                                 direction=spec.direction)
+    return eval_env(policy, atlas, spec), levels
 
 
 def first_episodes(env: StairEnv, policy: Policy, state) -> tuple[jax.Array, ...]:
-    """(finished, succeeded, fell) [B] of each robot's first episode from `state`, the policy's
-    mean action, over `env.episode_steps` steps (traceable: jit it)."""
+    """(finished, succeeded, fell, goal_step) [B] of each robot's first episode from `state`,
+    the policy's mean action, over `env.episode_steps` steps (traceable: jit it). goal_step:
+    the step (1-based) at which the success condition had held long enough, -1 if never."""
 
-    def body(carry, _):
-        st, finished, succeeded, fell = carry
+    def body(carry, k):
+        st, finished, succeeded, fell, goal_step = carry
         st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
-        first = (st.done > 0) & ~finished
+        done = st.done > 0
+        first = done & ~finished
+        # after a done step info holds the next episode: its success is in the metrics
+        now = jnp.where(done, st.metrics["episode_success"], st.info["success"]) > 0
+        goal_step = jnp.where(~finished & now & (goal_step < 0), k + 1, goal_step)
         succeeded = succeeded | (first & (st.metrics["episode_success"] > 0))
         fell = fell | (first & (st.metrics["terminated"] > 0))
-        return (st, finished | (st.done > 0), succeeded, fell), None
+        return (st, finished | done, succeeded, fell, goal_step), None
 
     zeros = jnp.zeros(state.done.shape, bool)
-    return jax.lax.scan(body, (state, zeros, zeros, zeros), None, env.episode_steps)[0][1:]
+    never = jnp.full(state.done.shape, -1, jnp.int32)
+    steps = jnp.arange(env.episode_steps, dtype=jnp.int32)
+    return jax.lax.scan(body, (state, zeros, zeros, zeros, never), steps)[0][1:]
 
 
 def _check_finished(finished: np.ndarray) -> None:
@@ -86,7 +95,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
     state = jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
     t0 = time.time()
-    finished, succeeded, fell = jax.device_get(
+    finished, succeeded, fell, _ = jax.device_get(
         jax.jit(lambda s: first_episodes(env, policy, s))(state))
     wall = time.time() - t0
     _check_finished(finished)
@@ -95,6 +104,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     return {
         "family": spec.family,
         "schedule": spec.schedule,
+        "direction": spec.direction,
         "levels": [lv + 1 for lv in levels],
         "success": [float(s) for s in succ],
         "fell": [float(f) for f in fall],
@@ -140,9 +150,8 @@ def cell_env(policy: Policy, spec: CellSpec) -> StairEnv:
     with one row per cell, two variants each."""
     import terrains
 
-    atlas = terrains.build_cell_atlas(spec.cells, 2, spec.resolution, spec.tile_size)
-    cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
-    return StairEnv(atlas, cfg)
+    return eval_env(policy, terrains.build_cell_atlas(spec.cells, 2, spec.resolution,
+                                                      spec.tile_size), spec)
 
 
 def initial_states(env: StairEnv, spec: CellSpec):
@@ -168,33 +177,46 @@ def cell_records(spec: CellSpec, success: np.ndarray, fell: np.ndarray, **extra)
     }
 
 
-def success_by_cell(policies: dict[str, Policy], spec: CellSpec) -> dict[str, dict[str, Any]]:
-    """Every policy on every cell of `spec`, MJX, one episode per robot, one compiled program
-    for all policies (their env configs with the overrides must agree)."""
-    first = next(iter(policies.values()))
-    env = cell_env(first, spec)
-    want = env_config_of(first, spec.env_overrides)
+def check_same_env(policies: dict[str, Policy], spec: EvalSpec | CellSpec) -> None:
+    """ValueError unless every policy's evaluation env config (with the overrides) is the
+    first's: one compiled program serves them all."""
+    first = next(iter(policies))
+    want = env_config_of(policies[first], spec.env_overrides)
     for name, p in policies.items():
         if env_config_of(p, spec.env_overrides) != want:
-            raise ValueError(f"policy {name!r} needs another env than {next(iter(policies))!r}")
-    state = initial_states(env, spec)
+            raise ValueError(f"policy {name!r} needs another env than {first!r}")
+
+
+def run_policies(policies: dict[str, Policy], env: StairEnv, state):
+    """Every policy's first episodes from `state` on `env`, one compiled program per network
+    and observation layout. Yields (name, finished, succeeded, fell, goal_step, wall_s), arrays
+    [B] on the host, the robots checked to have finished."""
 
     def run(st, params, norm, like):
         return first_episodes(env, like._replace(params=params, normalizer=norm), st)
 
-    compiled: dict[Any, Any] = {}  # one program per (network, observation layout)
-    out = {}
+    compiled: dict[Any, Any] = {}
     for name, p in policies.items():
         key = (p.network, p.layout, p.action_size)
         if key not in compiled:
             fn = jax.jit(functools.partial(run, like=p))
             compiled[key] = fn.lower(state, p.params, p.normalizer).compile()
         t0 = time.time()
-        finished, succeeded, fell = jax.device_get(compiled[key](state, p.params, p.normalizer))
+        finished, succeeded, fell, goal_step = jax.device_get(
+            compiled[key](state, p.params, p.normalizer))
         _check_finished(finished)
-        out[name] = cell_records(spec, succeeded, fell, physics="mjx", wall_s=time.time() - t0,
-                                 device=jax.devices()[0].device_kind)
-    return out
+        yield name, finished, succeeded, fell, goal_step, time.time() - t0
+
+
+def success_by_cell(policies: dict[str, Policy], spec: CellSpec) -> dict[str, dict[str, Any]]:
+    """Every policy on every cell of `spec`, MJX, one episode per robot, one compiled program
+    for all policies (their env configs with the overrides must agree)."""
+    check_same_env(policies, spec)
+    env = cell_env(next(iter(policies.values())), spec)
+    state = initial_states(env, spec)
+    return {name: cell_records(spec, succeeded, fell, physics="mjx", wall_s=wall,
+                               device=jax.devices()[0].device_kind)
+            for name, _, succeeded, fell, _, wall in run_policies(policies, env, state)}
 
 
 def evaluate(
@@ -234,6 +256,8 @@ def markdown_table(results: Sequence[dict[str, Any]]) -> str:
         name = (path.parent.name if path.name == "policy.npz" else path.stem) or str(path)
         if r.get("env_overrides"):
             name += " (" + ", ".join(r["env_overrides"]) + ")"
+        if r.get("direction", "up") != "up":
+            name += f", {r['direction']}"
         rows.append(f"| {name} | {r['family']} | " + " | ".join(cells) + " |")
     n = results[0]["robots_per_level"] if results else 0
     rows.append(f"\nSuccess in % of {n} robots per cell, one episode each.")

@@ -16,6 +16,10 @@ class EvalSpec:
     family: str = field(default="u_shaped", metadata={"help": "stair family"})
     schedule: Literal["train", "test", "extended"] = field(
         default="test", metadata={"help": "the level table"})
+    direction: Literal["up", "down"] = field(
+        default="up", metadata={"help": "walk the family's staircases up or down (the same "
+                                "tiles; down: spawn on the top landing, goal at the foot; "
+                                "--mesh and --suite cases carry their own)"})
     levels: tuple[int, ...] = field(
         default=(), metadata={"help": "levels, e.g. 1,2,3 (default all)", "one_based": True})
     robots_per_level: int = field(

@@ -248,7 +248,8 @@ def write_mcap(path: str | os.PathLike, env, r, policy_meta: dict[str, str] | No
 
         w.add_metadata("mjx_stairs", {
             "family": r.spec.family, "schedule": r.spec.schedule,
-            "level": str(r.spec.level + 1), "robots": str(r.num_robots),
+            "level": str(r.spec.level + 1), "staircase": r.terrain_name(),
+            "robots": str(r.num_robots),
             "seed": str(r.spec.seed), "dt_s": repr(r.dt), "frames": str(r.num_frames),
             "reward_terms": ",".join(terms), "joint_names": ",".join(rb.JOINT_NAMES),
             **(policy_meta or {}),

@@ -39,10 +39,9 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mjx_stairs.atomic import atomic_path  # noqa: E402
-from mjx_stairs.env.config import env_config_from, evaluation_config  # noqa: E402
 from mjx_stairs.env.stair_env import StairEnv  # noqa: E402
-from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config  # noqa: E402
-from mjx_stairs.study.experiment import TerrainConfig, build_atlas  # noqa: E402
+from mjx_stairs.rl.policy import Policy, load_policy, policy_action  # noqa: E402
+from mjx_stairs.study.evaluate import eval_env  # noqa: E402
 from mjx_stairs.tools.specs import PlaySpec  # noqa: E402
 
 
@@ -59,7 +58,8 @@ class Rollout:
     noise-free observation of the frame), reward [T, B], terms {name: [T, B]} (weighted, per
     step), done / terminated / success [T, B] float, foot_contact [T, B, 4] bool (FL, FR, RL, RR),
     tile [T, B] int, goal [T, B, 4] (x, y, z, yaw; world), step [T, B] int (steps into the
-    episode after the frame; 0 right after an auto-reset).
+    episode after the frame; 0 right after an auto-reset); case_name: the staircase, when it is
+    a case (a mesh) rather than a family level.
     """
 
     spec: PlaySpec
@@ -78,6 +78,7 @@ class Rollout:
     tile: np.ndarray
     goal: np.ndarray
     step: np.ndarray
+    case_name: str = ""
 
     @property
     def num_frames(self) -> int:
@@ -86,6 +87,11 @@ class Rollout:
     @property
     def num_robots(self) -> int:
         return int(self.qpos.shape[1])
+
+    def terrain_name(self) -> str:
+        """The staircase: the case's name, or the family, schedule and level."""
+        s = self.spec
+        return self.case_name or f"{s.family} {s.schedule} level {s.level + 1}"
 
     def times(self) -> np.ndarray:
         """[T] sim time (s) of each frame."""
@@ -111,23 +117,19 @@ def check_spec(spec: PlaySpec) -> None:
         raise ValueError(f"seconds must be > 0, got {spec.seconds}")
 
 
-def make_play_env(policy: Policy, spec: PlaySpec) -> StairEnv:
-    """The evaluation env of the policy on an atlas of one tile: `spec.family` at `spec.level`."""
-    check_spec(spec)
-    atlas = build_atlas(
-        TerrainConfig(
-            families=(spec.family,),
-            schedule=spec.schedule,
-            levels=(spec.level,),
-            variants_per_family=1,
-            resolution=spec.resolution,
-            tile_size=spec.tile_size,
-            border=spec.border,
-        )
-    )
-    cfg = evaluation_config(env_config_from(saved_config(policy, "env")),
-                            spec.episode_length_s)
-    env = StairEnv(atlas, cfg)
+def make_play_env(policy: Policy, spec: PlaySpec, case: tuple[str, Any] | None = None
+                  ) -> StairEnv:
+    """The evaluation env of the policy on an atlas of one tile: `spec.family` at `spec.level`,
+    or the (name, terrains.Tile) `case` (e.g. an imported mesh) when given."""
+    import terrains
+
+    if case is None:
+        check_spec(spec)
+        atlas = terrains.build_atlas([spec.family], spec.schedule, [spec.level], 1,
+                                     spec.resolution, spec.tile_size, spec.border)
+    else:
+        atlas = terrains.build_tile_atlas([[case[1]]], spec.border)
+    env = eval_env(policy, atlas, spec)  # the evaluation env, decided where eval decides it
     n = env.observation_size["state"][0]
     if policy.layout.obs_size != n or tuple(policy.layout.map_shape) != env.map_shape:
         raise ValueError(
@@ -180,7 +182,7 @@ def rollout(policy: Policy, spec: PlaySpec, env: StairEnv | None = None) -> Roll
 def summary(r: Rollout) -> str:
     """A few lines about the rollout: per robot the distance to the goal at the end, episodes."""
     lines = [
-        f"{r.spec.family} {r.spec.schedule} level {r.spec.level + 1}: {r.num_robots} robots, "
+        f"{r.terrain_name()}: {r.num_robots} robots, "
         f"{r.num_frames} steps of {r.dt * 1000:.0f} ms ({r.num_frames * r.dt:.1f} s)"
     ]
     for b in range(r.num_robots):
@@ -350,17 +352,22 @@ def play(
     width: int = 640,
     height: int = 480,
     fps: float = 50.0,
+    case: tuple[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Load the policy, roll out, write the video and/or the MCAP; returns what was done."""
-    check_spec(spec)
+    """Load the policy, roll out on the family level of `spec` or on the (name, tile) `case`,
+    write the video and/or the MCAP; returns what was done."""
+    if case is None:
+        check_spec(spec)
     if video is not None:  # fail before the rollout, not after
         if width % 2 or height % 2 or width < 16 or height < 16:
             raise ValueError(f"video size must be even and >= 16 x 16, got {width} x {height}")
         ensure_gl()
     policy = load_policy(checkpoint)
-    env = make_play_env(policy, spec)
+    env = make_play_env(policy, spec, case)
     t0 = time.time()
     r = rollout(policy, spec, env)
+    if case is not None:
+        r = dataclasses.replace(r, case_name=case[0])
     out: dict[str, Any] = {"rollout": r, "env": env, "rollout_s": time.time() - t0}
     print(summary(r), flush=True)
     if mcap is not None:

@@ -25,3 +25,7 @@ class PlaySpec:
     resolution: float = field(default=0.025, metadata={"help": "terrain grid (m)"})
     tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
     border: float = field(default=2.0, metadata={"help": "flat border around the tile (m)"})
+    env_overrides: tuple[str, ...] = field(
+        default=(),
+        metadata={"flag": "--env", "metavar": "KEY=VALUE",
+                  "help": "override the policy's env config, keys under [env] (as eval's --env)"})

@@ -12,10 +12,17 @@ from terrains.mesh import export_tile
 from terrains.mesh_import import import_mesh
 
 RES = 0.05
+OPEN_FOOT = ("open side: the start floor and the open strip beside the first flight make one "
+             "wider flat patch, and the route takes its middle")
+MISSES = {("building", 5, "l_left"): 0.17, ("building", 5, "spiral_ccw"): 0.42,
+          ("building", 5, "spiral_cw"): 0.34}
+"""Measured Hausdorff distances (m) above 0.15 m, all OPEN_FOOT; the tests expect them to fail."""
 CASES = [(f, lvl, v) for f in terrains.PAPER_FAMILIES for lvl in (2, 5)
          for v in terrains.variants(f)[:1]]
-CASES += [("building", lvl, v) for lvl in (2, 5)
-          for v in ("straight", "l_right", "u_left", "switchback_right")]
+CASES += [pytest.param(("building", lvl, v), marks=pytest.mark.xfail(
+              strict=True, reason=f"{MISSES[('building', lvl, v)]} m: {OPEN_FOOT}"))
+          if ("building", lvl, v) in MISSES else ("building", lvl, v)
+          for lvl in (2, 5) for v in terrains.variants("building")]
 
 
 def dense(c: np.ndarray, step: float = 0.01) -> np.ndarray:

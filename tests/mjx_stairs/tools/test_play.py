@@ -320,3 +320,26 @@ def test_a_policy_trained_with_a_bf16_encoder_loads_in_float32(policy_file, tmp_
     obs = jax.random.normal(jax.random.PRNGKey(2), (4, D))
     np.testing.assert_array_equal(policy_lib.policy_action(pol, obs),
                                   policy_lib.policy_action(ref, obs))
+
+
+def test_play_on_a_mesh(policy_file, tmp_path, capsys):
+    """play --mesh: the rollout runs on the imported staircase (the robots start at --start, the
+    goal is --goal, in the atlas frame), and the MCAP names the mesh."""
+    import trimesh
+    from mcap.reader import make_reader
+
+    floor = trimesh.creation.box((3.0, 2.0, 0.2))
+    floor.apply_translation((0.0, 0.0, -0.1))
+    floor.export(tmp_path / "floor.stl")
+    out = tmp_path / "r.mcap"
+    code = cli.main(["play", "--checkpoint", str(policy_file),
+                     "--mesh", str(tmp_path / "floor.stl"), "--start", "-0.6,0", "--goal",
+                     "0.6,0", "--robots", "1", "--seconds", "0.1", "--resolution", "0.1",
+                     "--mcap", str(out)])
+    assert code == 0
+    assert "floor: 1 robots" in capsys.readouterr().out
+    with open(out, "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["mjx_stairs"]
+    assert meta["staircase"] == "floor"
+    log = mcap_log.read_mcap(out)
+    assert len(log["/terrain"]) == 1

@@ -1,0 +1,215 @@
+"""Issue 23's baseline and checks: the committed policies on the `code` suite (building-code
+stairs, every shape up and down, one atlas, 1000 robots per case), and `eval --mesh` against
+`eval --family` on the same staircase.
+
+  python experiments/gpu/code_suite.py OUT [--steps suite,mesh,alone] [--policies a,b]
+      [--robots 1000] [--episode-s 30] [--env KEY=VALUE ...]
+  smoke test on a CPU: JAX_PLATFORMS=cpu python experiments/gpu/code_suite.py /tmp/cs
+      --robots 4 --episode-s 2 --resolution 0.1
+
+Steps, each writing JSON under OUT as soon as it is complete and skipped when its file exists
+(so a command cut short is continued by running it again):
+  suite  every policy on the code suite: OUT/code_<policy>.json (one record per case)
+  mesh   U-shaped test level 3 (left) exported to STL, then for stage2_u and stage2_u_lean:
+         eval --family u_shaped --levels 3 (the same starts, left and right tiles;
+         OUT/u3_family_<policy>.json), eval --mesh with the importer's route
+         (OUT/u3_mesh_<policy>.json) and eval --suite of the exported case, whose JSON carries
+         the procedural route and spawn area (OUT/u3_case_<policy>.json)
+  alone  stage2_u on four code cases one at a time (OUT/code_alone_stage2_u.json), to compare
+         with the same cases in code_stage2_u.json
+  table  (no GPU) OUT/code_suite.md from the files present: success / falls per case and policy,
+         the U level 3 comparison and the together-or-alone comparison
+Every evaluation runs in the evaluation env of mjx_stairs.study.evaluate.eval_env, with --env
+added (the default: the reference physics, in which every published number is measured).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+RESULTS = Path("experiments/results")
+POLICIES = {  # the committed policies the README cites
+    "stage1": RESULTS / "stage1/policy.npz",
+    "stage2_u": RESULTS / "stage2_u/policy.npz",
+    "stage2_u_lean": RESULTS / "stage2_u_lean/policy.npz",
+    "straight_lean": RESULTS / "transfer_lean/straight/policy.npz",
+    "l_shaped_lean": RESULTS / "transfer_lean/l_shaped/policy.npz",
+    "spiral_lean": RESULTS / "transfer_lean/spiral/policy.npz",
+}
+MESH_POLICIES = ("stage2_u", "stage2_u_lean")
+ALONE = ("code_commercial_straight_up", "code_commercial_u_left_down",
+         "code_residential_spiral_ccw_up", "code_residential_winder_left_down")
+EVAL_PHYSICS = ("robot.physics=reference",)
+
+
+def write(path: Path, record: dict) -> None:
+    from mjx_stairs.atomic import write_text
+
+    write_text(path, json.dumps(record, indent=1))
+    print(f"[code_suite] wrote {path}", flush=True)
+
+
+def facts(spec, t0: float, **extra) -> dict:
+    import jax
+
+    return {"robots_per_case": spec.robots_per_level, "episode_length_s": spec.episode_length_s,
+            "seed": spec.seed, "resolution": spec.resolution,
+            "env_overrides": list(spec.env_overrides), "device": jax.devices()[0].device_kind,
+            "wall_s_with_compile": time.time() - t0, **extra}
+
+
+def run_suite(out: Path, names: list[str], spec) -> None:
+    """Policies that share an evaluation env share one compiled program (cases.by_env)."""
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import cases
+
+    code = cases.suite_cases("code", spec.resolution)
+    todo = {n: load_policy(POLICIES[n]) for n in names if not (out / f"code_{n}.json").exists()}
+    for group in cases.by_env(todo, spec) if todo else []:
+        t0 = time.time()
+        for name, recs in cases.success_by_case(group, code, spec).items():
+            print(f"\n{name}, code suite\n" + cases.case_table(recs), flush=True)
+            write(out / f"code_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                   suite="code", results=recs))
+
+
+def run_alone(out: Path, spec) -> None:
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import cases
+
+    path = out / "code_alone_stage2_u.json"
+    if path.exists():
+        return
+    t0 = time.time()
+    policy = {"stage2_u": load_policy(POLICIES["stage2_u"])}
+    code = dict(cases.suite_cases("code", spec.resolution))
+    recs = [cases.success_by_case(policy, [(n, code[n])], spec)["stage2_u"][0] for n in ALONE]
+    print("\nstage2_u, code cases one at a time\n" + cases.case_table(recs), flush=True)
+    write(path, facts(spec, t0, policy=str(POLICIES["stage2_u"]), results=recs))
+
+
+def export_u3(out: Path, resolution: float) -> Path:
+    """U-shaped test level 3 (left) as OUT/u3/u3.stl + u3.json (the procedural route)."""
+    import terrains
+    from terrains.suites import write_case
+
+    folder = out / "u3"
+    if not (folder / "u3.json").exists():
+        tile = terrains.make_tile("u_shaped", 2, "left", "test", resolution)
+        write_case(tile, folder, "u3")
+    return folder
+
+
+def run_mesh(out: Path, spec) -> None:
+    """The family (evaluate.success_by_cell: the starts of eval --family), the mesh and the
+    case, each one program for both policies."""
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import cases, evaluate
+
+    folder = export_u3(out, spec.resolution)
+    rec = json.loads((folder / "u3.json").read_text())
+    policies = {n: load_policy(POLICIES[n]) for n in MESH_POLICIES}
+    if not all((out / f"u3_family_{n}.json").exists() for n in policies):
+        t0 = time.time()
+        cell = evaluate.CellSpec(cells=(("u_shaped", "test", 2),),
+                                 robots_per_cell=spec.robots_per_level,
+                                 episode_length_s=spec.episode_length_s, seed=spec.seed,
+                                 resolution=spec.resolution, env_overrides=spec.env_overrides)
+        for name, r in evaluate.success_by_cell(policies, cell).items():
+            print(f"{name} eval --family u_shaped --levels 3: {100 * r['success'][0]:.1f} %")
+            write(out / f"u3_family_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                         result=r))
+    found = {"mesh": lambda: cases.mesh_cases(folder / "u3.stl", rec["start"][:2],
+                                              rec["goal"][:2], None, spec.resolution),
+             "case": lambda: cases.suite_cases(str(folder), spec.resolution)}
+    for kind, make in found.items():
+        if all((out / f"u3_{kind}_{n}.json").exists() for n in policies):
+            continue
+        t0 = time.time()
+        for name, recs in cases.success_by_case(policies, make(), spec).items():
+            print(f"{name} eval --{'mesh' if kind == 'mesh' else 'suite'} u3\n"
+                  + cases.case_table(recs), flush=True)
+            write(out / f"u3_{kind}_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                         results=recs))
+
+
+def write_table(out: Path) -> None:
+    """Long: three markdown tables, each only from the files present."""
+    from mjx_stairs.atomic import write_text
+
+    runs = {p.stem[len("code_"):]: json.loads(p.read_text())
+            for p in sorted(out.glob("code_*.json")) if p.stem != "code_alone_stage2_u"}
+    lines = []
+    if runs:
+        first = next(iter(runs.values()))
+        lines += [f"Success / falls in % of {first['robots_per_case']} robots per case, one "
+                  f"{first['episode_length_s']:g} s episode, env {first['env_overrides']}, "
+                  f"{first['device']}.", "",
+                  "| case | " + " | ".join(runs) + " |", "|---|" + "---|" * len(runs)]
+        for i, rec in enumerate(first["results"]):
+            cells = [f"{100 * r['results'][i]['success']:.1f} / {100 * r['results'][i]['fell']:.1f}"
+                     for r in runs.values()]
+            lines.append(f"| {rec['name']} | " + " | ".join(cells) + " |")
+    u3 = []
+    for name in MESH_POLICIES:
+        got = {k: out / f"u3_{k}_{name}.json" for k in ("family", "mesh", "case")}
+        if all(p.exists() for p in got.values()):
+            fam = json.loads(got["family"].read_text())["result"]  # a cell record
+            m, c = (json.loads(got[k].read_text())["results"][0] for k in ("mesh", "case"))
+            u3.append(f"| {name} | {100 * fam['success'][0]:.1f} | {100 * m['success']:.1f} | "
+                      f"{100 * c['success']:.1f} |")
+    if u3:
+        lines += ["", "U-shaped test level 3, success in %: eval --family (left and right), "
+                  "eval --mesh of the exported left tile (importer's route), eval --suite of it "
+                  "(procedural route and spawn)", "", "| policy | family | mesh | case |",
+                  "|---|---|---|---|", *u3]
+    alone = out / "code_alone_stage2_u.json"
+    if alone.exists() and "stage2_u" in runs:
+        together = {r["name"]: r for r in runs["stage2_u"]["results"]}
+        lines += ["", "stage2_u, success / falls in %: the case in the suite's atlas, alone", "",
+                  "| case | together | alone |", "|---|---|---|"]
+        for r in json.loads(alone.read_text())["results"]:
+            t = together[r["name"]]
+            lines.append(f"| {r['name']} | {100 * t['success']:.1f} / {100 * t['fell']:.1f} | "
+                         f"{100 * r['success']:.1f} / {100 * r['fell']:.1f} |")
+    write_text(out / "code_suite.md", "\n".join(lines) + "\n")
+    print("\n".join(lines), flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--steps", default="suite,mesh,alone,table")
+    ap.add_argument("--policies", default=",".join(POLICIES), help="for the suite step")
+    ap.add_argument("--robots", type=int, default=1000, help="robots per case")
+    ap.add_argument("--episode-s", type=float, default=30.0)
+    ap.add_argument("--resolution", type=float, default=0.025)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--env", nargs="*", default=list(EVAL_PHYSICS), metavar="KEY=VALUE",
+                    help="env overrides of every evaluation (default: %(default)s)")
+    a = ap.parse_args()
+    from mjx_stairs.study.specs import EvalSpec
+
+    spec = EvalSpec(robots_per_level=a.robots, episode_length_s=a.episode_s, seed=a.seed,
+                    resolution=a.resolution, env_overrides=tuple(a.env))
+    a.out.mkdir(parents=True, exist_ok=True)
+    names = [n for n in a.policies.split(",") if n]
+    missing = [n for n in names if n not in POLICIES or not POLICIES[n].exists()]
+    if missing:
+        raise SystemExit(f"code_suite: no committed policy for {', '.join(missing)}")
+    steps = a.steps.split(",")
+    t0 = time.time()
+    for step, fn in (("suite", lambda: run_suite(a.out, names, spec)),
+                     ("mesh", lambda: run_mesh(a.out, spec)),
+                     ("alone", lambda: run_alone(a.out, spec)),
+                     ("table", lambda: write_table(a.out))):
+        if step in steps:
+            fn()
+            print(f"[code_suite] {step} done at {time.time() - t0:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main()
