@@ -72,11 +72,12 @@ def spec_from(cls: type, args: argparse.Namespace, **extra: Any) -> Any:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from mjx_stairs.rl import runner
+    from mjx_stairs.rl import distributed, runner
     from mjx_stairs.study import experiment
 
+    distributed.initialize_from_env()  # several processes: MJX_STAIRS_COORDINATOR etc.
     config, cpu = experiment.load(args.config, args.overrides)
-    if cpu:
+    if cpu and distributed.is_main():
         print(
             f"[mjx-stairs] no GPU: running the CPU preset of {args.config} "
             f"({config.train.num_envs} robots, {config.train.total_iterations} iterations); "
@@ -85,7 +86,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         )
     env = experiment.make_env(config)
     result = runner.run(config, env, run_dir=args.run_dir, resume=args.resume)
-    if config.publish_dir:
+    if config.publish_dir and distributed.is_main():
         experiment.publish(result.run_dir, config.publish_dir, result.metrics, result.stop_reason)
         print(f"[mjx-stairs] published to {config.publish_dir}", flush=True)
     return 0
