@@ -1,11 +1,12 @@
 """One process of a small training run, for test_distributed (run as a script).
 
-    python -m tests.mjx_stairs.rl.distributed_run OUT_DIR
+    python -m tests.mjx_stairs.rl.distributed_run OUT_DIR [STATE_FILE]
 
 trains the toy task (16 robots with a 5 x 5 map, 2 iterations of one chunk each, a checkpoint
-after each) into ``OUT_DIR/run``. With MJX_STAIRS_COORDINATOR / _NUM_PROCESSES / _PROCESS_ID set
-it is one of several processes (rl.distributed); XLA_FLAGS decides its devices. Each process
-writes ``OUT_DIR/process_<i>.json``: its view of the devices and every chunk's record.
+after each) into ``OUT_DIR/run``, then, given a STATE_FILE, resumes from it into
+``OUT_DIR/resumed``. With MJX_STAIRS_COORDINATOR / _NUM_PROCESSES / _PROCESS_ID set it is one of
+several processes (rl.distributed); XLA_FLAGS decides its devices. Each process writes
+``OUT_DIR/process_<i>.json``: its view of the devices and every chunk's record.
 """
 
 from __future__ import annotations
@@ -32,25 +33,26 @@ def config(out: Path):
     return LearnerConfig(network=net, train=train, ppo=PPOConfig(num_minibatches=4, num_epochs=2))
 
 
-def main(out: Path) -> None:
+def main(out: Path, resume: str = "") -> None:
     distributed.initialize_from_env()  # before any JAX computation
     import jax
 
     from mjx_stairs.rl import runner
     from tests.mjx_stairs.rl.toy_env import PointReach
 
-    cfg = config(out)
-    records = []
-    on_chunk = lambda r: records.append(
+    cfg, env = config(out), PointReach(map_shape=(5, 5))
+    records, resumed = [], []
+    keep = lambda into: lambda r: into.append(
         {k: v for k, v in r.items() if not k.startswith(STEADY)})
-    result = runner.run(cfg, PointReach(map_shape=(5, 5)), run_dir=out / "run",
-                        on_chunk=on_chunk)
+    result = runner.run(cfg, env, run_dir=out / "run", on_chunk=keep(records))
+    if resume:
+        runner.run(cfg, env, run_dir=out / "resumed", resume=resume, on_chunk=keep(resumed))
     facts = {"process_index": jax.process_index(), "process_count": jax.process_count(),
              "devices": len(jax.devices()), "local_devices": len(jax.local_devices()),
              "mesh_devices": int(result.state.params["log_std"].sharding.mesh.devices.size),
-             "records": records, "stop_reason": result.stop_reason}
+             "records": records, "resumed_records": resumed, "stop_reason": result.stop_reason}
     (out / f"process_{jax.process_index()}.json").write_text(json.dumps(facts))
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]))
+    main(Path(sys.argv[1]), *sys.argv[2:])

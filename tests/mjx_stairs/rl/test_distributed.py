@@ -1,6 +1,6 @@
 """Several processes through jax.distributed on this machine's CPU: two processes of two host
-devices each train exactly as one process with four, and their checkpoint resumes in one
-process with one device."""
+devices each train exactly as one process with four; a checkpoint of one process resumes in two,
+and one of two processes in one process with one device."""
 
 from __future__ import annotations
 
@@ -49,25 +49,18 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _start(out: Path, devices: int, **variables: str) -> subprocess.Popen:
+def _start(out: Path, devices: int, *args: str, **variables: str) -> subprocess.Popen:
     out.mkdir(parents=True, exist_ok=True)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MJX_STAIRS_", "JAX_"))}
     env.update(PYTHONPATH=str(ROOT), JAX_PLATFORMS="cpu",
                XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}", **variables)
     log = (out / f"log_{variables.get('MJX_STAIRS_PROCESS_ID', 0)}.txt").open("w")
     return subprocess.Popen([sys.executable, "-m", "tests.mjx_stairs.rl.distributed_run",
-                             str(out)], cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+                             str(out), *args], cwd=ROOT, env=env, stdout=log,
+                            stderr=subprocess.STDOUT)
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    """The same run twice, at once: one process with four devices ("one"), two processes with
-    two devices each through a localhost coordinator ("two")."""
-    root = tmp_path_factory.mktemp("distributed")
-    port = str(_free_port())
-    procs = [_start(root / "one", 4)] + [
-        _start(root / "two", 2, MJX_STAIRS_COORDINATOR=f"localhost:{port}",
-               MJX_STAIRS_NUM_PROCESSES="2", MJX_STAIRS_PROCESS_ID=str(i)) for i in (0, 1)]
+def _wait(procs: list[subprocess.Popen], root: Path) -> None:
     try:
         codes = [p.wait(timeout=400) for p in procs]
     finally:
@@ -75,7 +68,20 @@ def runs(tmp_path_factory):
             if p.poll() is None:
                 p.kill()
     logs = "".join(f.read_text()[-2000:] for f in sorted(root.glob("*/log_*.txt")))
-    assert codes == [0, 0, 0], logs
+    assert codes == [0] * len(procs), logs
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """The same run twice: one process with four devices ("one"), then two processes with two
+    devices each through a localhost coordinator ("two"), which also resume from the first
+    run's checkpoint after iteration 1 ("two/resumed")."""
+    root = tmp_path_factory.mktemp("distributed")
+    _wait([_start(root / "one", 4)], root)
+    port, start = str(_free_port()), str(_checkpoint_path(root / "one", 1))
+    _wait([_start(root / "two", 2, start, MJX_STAIRS_COORDINATOR=f"localhost:{port}",
+                  MJX_STAIRS_NUM_PROCESSES="2", MJX_STAIRS_PROCESS_ID=str(i)) for i in (0, 1)],
+          root)
     return root
 
 
@@ -83,8 +89,12 @@ def _facts(out: Path, process: int) -> dict:
     return json.loads((out / f"process_{process}.json").read_text())
 
 
-def _checkpoint(out: Path, iteration: int) -> tuple[dict, dict]:
-    return checkpoint.load(checkpoint.checkpoint_path(out / "run" / "checkpoints", iteration))
+def _checkpoint_path(out: Path, iteration: int, run: str = "run") -> Path:
+    return checkpoint.checkpoint_path(out / run / "checkpoints", iteration)
+
+
+def _checkpoint(out: Path, iteration: int, run: str = "run") -> tuple[dict, dict]:
+    return checkpoint.load(_checkpoint_path(out, iteration, run))
 
 
 def _assert_close(a: dict, b: dict, rtol: float, atol: float) -> None:
@@ -122,7 +132,7 @@ def test_a_two_process_checkpoint_resumes_in_one_process(runs, tmp_path):
     second iteration reproduces the two-process one (up to the order of float sums)."""
     assert len(jax.devices()) == 1
     cfg = distributed_run.config(tmp_path)
-    start = checkpoint.checkpoint_path(runs / "two" / "run" / "checkpoints", 1)
+    start = _checkpoint_path(runs / "two", 1)
     resumed = runner.run(cfg, PointReach(map_shape=(5, 5)), run_dir=tmp_path / "run",
                          resume=start)
     assert int(resumed.state.iteration) == ITERATIONS and resumed.stop_reason == "total_iterations"
@@ -132,3 +142,16 @@ def test_a_two_process_checkpoint_resumes_in_one_process(runs, tmp_path):
     record = json.loads((tmp_path / "run" / "metrics.jsonl").read_text().splitlines()[-1])
     two = _facts(runs / "two", 0)["records"][-1]
     _assert_close({k: record[k] for k in two}, two, rtol=1e-3, atol=1e-4)
+
+
+def test_a_one_process_checkpoint_resumes_in_two_processes(runs):
+    """Each of the two processes builds its devices' part of the global state from the file
+    (put_global); the second iteration then matches the one-process run's."""
+    p0, p1 = _facts(runs / "two", 0), _facts(runs / "two", 1)
+    assert p0["resumed_records"] == p1["resumed_records"]
+    assert [r["iteration"] for r in p0["resumed_records"]] == [2]
+    _assert_close(p0["resumed_records"][0], _facts(runs / "one", 0)["records"][1], rtol=1e-5,
+                  atol=1e-6)
+    resumed, meta = _checkpoint(runs / "two", 2, "resumed")
+    assert meta["processes"] == 2
+    _assert_close(resumed, _checkpoint(runs / "one", 2)[0], rtol=1e-5, atol=1e-6)
