@@ -72,10 +72,12 @@ def spec_from(cls: type, args: argparse.Namespace, **extra: Any) -> Any:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from mjx_stairs.rl import distributed, runner
+    from mjx_stairs.rl import distributed
+
+    distributed.initialize_from_env()  # several processes (MJX_STAIRS_COORDINATOR etc.): first
+    from mjx_stairs.rl import runner
     from mjx_stairs.study import experiment
 
-    distributed.initialize_from_env()  # several processes: MJX_STAIRS_COORDINATOR etc.
     config, cpu = experiment.load(args.config, args.overrides)
     if cpu and distributed.is_main():
         print(
