@@ -265,7 +265,7 @@ def run_scaling(
     _check_parts(parts)
     if set(scalings) - set(SCALINGS) or not scalings:
         raise ValueError(f"bench: scalings {list(scalings)}, expected some of {list(SCALINGS)}")
-    available = jax.devices()
+    available, devices = jax.devices(), sorted(set(devices))
     if max(devices) > len(available) or min(devices) < 1:
         raise ValueError(f"bench: --devices {devices}, but {len(available)} devices are visible")
     env = make_env(config)
