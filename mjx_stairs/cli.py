@@ -72,11 +72,14 @@ def spec_from(cls: type, args: argparse.Namespace, **extra: Any) -> Any:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from mjx_stairs.rl import distributed
+
+    distributed.initialize_from_env()  # several processes (MJX_STAIRS_COORDINATOR etc.): first
     from mjx_stairs.rl import runner
     from mjx_stairs.study import experiment
 
     config, cpu = experiment.load(args.config, args.overrides)
-    if cpu:
+    if cpu and distributed.is_main():
         print(
             f"[mjx-stairs] no GPU: running the CPU preset of {args.config} "
             f"({config.train.num_envs} robots, {config.train.total_iterations} iterations); "
@@ -85,7 +88,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         )
     env = experiment.make_env(config)
     result = runner.run(config, env, run_dir=args.run_dir, resume=args.resume)
-    if config.publish_dir:
+    if config.publish_dir and distributed.is_main():
         experiment.publish(result.run_dir, config.publish_dir, result.metrics, result.stop_reason)
         print(f"[mjx-stairs] published to {config.publish_dir}", flush=True)
     return 0
@@ -192,13 +195,15 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from mjx_stairs.study import bench, experiment
 
     config, _ = experiment.load(args.config, args.overrides, cpu=False)
-    out = bench.run_bench(
-        config,
-        list(args.robots),
-        steps=args.steps,
-        repeats=args.repeats,
-        parts=tuple(args.parts.split(",")),
-    )
+    default_parts = "physics,train" if args.devices else ",".join(bench.PARTS)
+    parts = tuple((args.parts or default_parts).split(","))
+    if args.devices:  # scaling rows over the first N devices
+        out = bench.run_scaling(config, list(args.devices), per_device=args.per_device,
+                                total=args.total, scalings=tuple(args.scaling.split(",")),
+                                steps=args.steps, repeats=args.repeats, parts=parts)
+    else:
+        out = bench.run_bench(config, list(args.robots or (4096, 16384)), steps=args.steps,
+                              repeats=args.repeats, parts=parts)
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         write_text(args.out, json.dumps(out, indent=2))
@@ -300,10 +305,19 @@ def _add_train_and_eval(sub) -> None:
     b = sub.add_parser("bench", help="physics / env / training throughput")
     b.add_argument("--config", default="experiments/stage2_u.toml")
     b.add_argument("overrides", nargs="*")
-    b.add_argument("--robots", type=int, nargs="+", default=[4096, 16384])
+    b.add_argument("--robots", type=int, nargs="+", default=None,
+                   help="robot counts over all devices (default 4096 16384)")
+    b.add_argument("--devices", type=_csv_ints, default=(), metavar="N,N,...",
+                   help="scaling rows over the first N devices for each N (e.g. 1,2,4,8), "
+                   "weak and strong; --robots is then not used")
+    b.add_argument("--per-device", type=int, default=4096, help="weak scaling: robots per device")
+    b.add_argument("--total", type=int, default=16384, help="strong scaling: robots in all")
+    b.add_argument("--scaling", default="weak,strong", help="weak, strong or both")
     b.add_argument("--steps", type=int, default=24)
     b.add_argument("--repeats", type=int, default=5)
-    b.add_argument("--parts", default="physics,env,rollout,train")
+    b.add_argument("--parts", default=None,
+                   help="of physics,env,rollout,train (default: all; physics,train with "
+                   "--devices)")
     b.add_argument("--out", default=None, help="JSON path")
     b.set_defaults(fn=cmd_bench)
 

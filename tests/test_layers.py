@@ -13,12 +13,13 @@ TOP = {"mjx_stairs.config", "mjx_stairs.atomic"}  # leaf utilities every layer m
 
 # study/tools modules that may use more of rl than its policy files (rl.policy): the experiment
 # config gathers the learner's config dataclasses; the pipelines train; the bench times the trainer
+# over the devices it names
 RL_BEYOND_POLICY = {
     "mjx_stairs.study.experiment": {"networks", "ppo", "trainer", "logger"},
     "mjx_stairs.study.exp1": {"runner"},
     "mjx_stairs.study.plots": {"logger"},  # reads metrics.jsonl
     "mjx_stairs.study.transfer": {"runner"},
-    "mjx_stairs.study.bench": {"trainer", "rollout"},
+    "mjx_stairs.study.bench": {"trainer", "rollout", "sharding"},
 }
 
 

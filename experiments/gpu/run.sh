@@ -8,13 +8,14 @@
 # (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean (the lean physics and its
 # check in the reference physics), straight-lean, l-shaped-lean, spiral-lean, transfer-lean
 # (Tables 1-2), bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml),
-# eval-committed (committed policies in the reference physics), code-suite (issue 23: the code
-# suite baseline), pack. Each training step stops and checkpoints before DEADLINE_S seconds after
-# the script started, and leaves in $OUT/<name>/ the policy, metrics, run facts and a packed
-# state.npz (~11 MB for 4096 robots). To continue a run in the next command, copy that state.npz
-# and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl. Stage 2 starts
-# from experiments/results/stage1/policy.npz: commit the stage-1 policy there first. TRAIN_ARGS
-# (key=value ...) is added to every training command.
+# scaling (bench --devices over the GPUs visible), two-processes (one process on two GPUs against
+# two processes through jax.distributed), eval-committed (committed policies in the reference
+# physics), code-suite (issue 23: the code suite baseline), pack. Each training step stops and
+# checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
+# policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
+# the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
+# carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
+# stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command.
 set -uo pipefail
 T0=$(date +%s)
 DEADLINE=$1; shift
@@ -65,6 +66,29 @@ bench() {  # bench OUT_FILE CONFIG [overrides and options...]
   python3 -m mjx_stairs bench --config "$toml" "$@" --out "$out" 2>&1 | grep -v warp
 }
 
+two_processes() {  # the same short stage-2 run: one process on GPUs 0,1, then two processes of
+  # one GPU each through jax.distributed (NCCL; NCCL_NVLS_ENABLE stays as the host sets it: 0)
+  local d="$OUT/two_processes" port=$(( 20000 + RANDOM % 20000 ))
+  local args=(experiments/stage2_u_lean.toml train.log_dir=/tmp/runs train.progress=false
+    train.console=false "train.num_envs=${TWO_ROBOTS:-8192}"
+    "train.total_iterations=${TWO_ITERATIONS:-30}" train.checkpoint_every=0 publish_dir=
+    ${TRAIN_ARGS:-})
+  mkdir -p "$d"
+  echo "== one process, two GPUs"
+  python3 -m mjx_stairs train "${args[@]}" --run-dir /tmp/runs/one 2>&1 | grep -v warp
+  echo "== two processes, one GPU each (coordinator localhost:$port)"
+  for i in 0 1; do
+    MJX_STAIRS_COORDINATOR=localhost:$port MJX_STAIRS_NUM_PROCESSES=2 MJX_STAIRS_PROCESS_ID=$i \
+      JAX_LOCAL_DEVICE_IDS=$i python3 -m mjx_stairs train "${args[@]}" --run-dir /tmp/runs/two \
+      > "$d/process_$i.log" 2>&1 &
+  done
+  wait
+  grep -v warp "$d/process_0.log" | tail -3
+  cp /tmp/runs/one/metrics.jsonl "$d/one_process.jsonl"
+  cp /tmp/runs/two/metrics.jsonl "$d/two_processes.jsonl"
+  python3 experiments/compare_runs.py /tmp/runs/one /tmp/runs/two --out "$d/compare.json"
+}
+
 for step in "$@"; do
   case $step in
     # EXP1 (docs/results.md sections 1-3): stage 1, stage 2 (waypoint goal), its no-stall
@@ -108,6 +132,15 @@ for step in "$@"; do
     bench) bench "$OUT/bench.json" experiments/stage2_u.toml --robots 4096 16384 ;;
     bench-lean) bench "$OUT/bench/abcr_lean.json" experiments/stage2_u_lean.toml \
         --robots 4096 16384 ;;
+    # scale-out (issue 26): rows over one GPU and all N visible (SCALING_DEVICES=1,2,4 to
+    # choose; each row compiles physics and the chunk, ~1.5 min), at 4096 robots per GPU (weak)
+    # and 16 384 in all (strong), physics-only and training, each with its efficiency against
+    # one GPU and the chunk's compile time
+    scaling)
+      n=$(nvidia-smi -L | wc -l)
+      bench "$OUT/scaling/scaling_${n}gpu.json" experiments/stage2_u_lean.toml \
+        --devices "${SCALING_DEVICES:-1,$n}" ;;
+    two-processes) two_processes ;;
     # committed policies (EVAL_RUNS: names under experiments/results/) in the reference physics,
     # loaded as a robot runs them (float32 encoder), into $OUT/eval/<name>
     eval-committed)

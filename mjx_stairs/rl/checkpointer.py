@@ -6,6 +6,11 @@ holds on the CPU. On a GPU, XLA's default kernels (cuDNN conv backward, atomic r
 not run-to-run deterministic, so a resumed run matches only up to float noise unless the process
 starts with ``XLA_FLAGS=--xla_gpu_deterministic_ops=true`` (seen on an H100: the resume test
 fails without it and passes with it).
+
+With several processes (rl.distributed) every process calls the savers (the robots split over
+other processes' devices are gathered) and process 0 writes; a checkpoint holds the global host
+arrays, so one written by N processes resumes on any M whose devices divide the robots. Every
+process reads the file it resumes from (a shared filesystem, or the file copied to each host).
 """
 
 from __future__ import annotations
@@ -18,9 +23,10 @@ import jax
 
 from mjx_stairs.rl import checkpoint
 from mjx_stairs.rl import policy as policy_lib
+from mjx_stairs.rl.distributed import is_main
 from mjx_stairs.rl.networks import ObsLayout
 from mjx_stairs.rl.policy import config_dict, layout_dict
-from mjx_stairs.rl.sharding import batched
+from mjx_stairs.rl.sharding import batched, put_global, to_host
 from mjx_stairs.rl.trainer import Trainer, TrainState
 
 _PACKERS: dict[int, tuple[Any, Callable, Callable]] = {}
@@ -42,7 +48,8 @@ def _packers(env) -> tuple[Callable, Callable]:
 
 def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
                extra: dict | None = None, env=None) -> None:
-    """Full checkpoint: the whole TrainState + config and counters as metadata.
+    """Full checkpoint: the whole TrainState + config and counters as metadata. Every process
+    calls it; process 0 writes.
 
     With ``train.checkpoint_env == "packed"`` the env state is stored as
     ``vmap(env.pack_state)`` (``env`` required) and rebuilt with ``env.unpack_state`` on load.
@@ -52,7 +59,9 @@ def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
     if env_format == "packed":
         pack, _ = _packers(env)
         state = state._replace(env_state=pack(state.env_state))
-    host = jax.device_get(state)
+    host = to_host(state)
+    if not is_main():
+        return
     it = int(host.iteration)
     meta = {
         "kind": "train_state",
@@ -63,6 +72,7 @@ def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
         "layout": layout_dict(layout),
         "action_size": int(host.params["log_std"].shape[0]),
         "jax_version": jax.__version__,
+        "processes": jax.process_count(),
         "saved_at": time.time(),
     }
     meta.update(extra or {})
@@ -80,20 +90,21 @@ def load_state(path: str | Path, trainer: Trainer) -> tuple[TrainState, dict]:
         packed_t = jax.eval_shape(pack, trainer.template.env_state)
         host, meta = checkpoint.load(path, trainer.template._replace(env_state=packed_t))
         bat = batched(trainer.mesh)
-        packed = jax.device_put(host.env_state, jax.tree_util.tree_map(lambda _: bat, packed_t))
+        packed = put_global(host.env_state, jax.tree_util.tree_map(lambda _: bat, packed_t))
         env_state = jax.device_put(unpack(packed), trainer.sharding.env_state)
-        state = jax.device_put(host._replace(env_state=None),
-                               trainer.sharding._replace(env_state=None))
+        state = put_global(host._replace(env_state=None),
+                           trainer.sharding._replace(env_state=None))
         return state._replace(env_state=env_state), meta
     host, meta = checkpoint.load(path, trainer.template)
-    return jax.device_put(host, trainer.sharding), meta
+    return put_global(host, trainer.sharding), meta
 
 
 
 def save_policy(path: str | Path, state: TrainState, config, layout: ObsLayout) -> None:
-    """The policy file of a TrainState (rl.policy.save_policy)."""
-    policy_lib.save_policy(path, state.params, state.normalizer,
-                           int(jax.device_get(state.iteration)), config, layout)
+    """The policy file of a TrainState (rl.policy.save_policy), written by process 0."""
+    params, norm, it = to_host((state.params, state.normalizer, state.iteration))
+    if is_main():
+        policy_lib.save_policy(path, params, norm, int(it), config, layout)
 
 
 class Checkpointer:
@@ -115,7 +126,8 @@ class Checkpointer:
         save_state(checkpoint.checkpoint_path(self.directory, it), state, self.config,
                    self.trainer.layout, env=self.trainer.env)
         save_policy(self.run_dir / "policy.npz", state, self.config, self.trainer.layout)
-        checkpoint.prune(self.directory, self.config.train.keep_checkpoints)
+        if is_main():
+            checkpoint.prune(self.directory, self.config.train.keep_checkpoints)
         self.save_s = max(self.save_s, time.time() - t)
         self.saved_iteration = it
 

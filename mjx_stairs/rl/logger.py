@@ -171,3 +171,13 @@ class RunLogger:
         if self.bar is not None:
             self.bar.close()
         self.metrics.close()
+
+
+class SilentLogger:
+    """RunLogger's stand-in on processes other than 0 (rl.distributed): shows and keeps nothing."""
+
+    def log(self, record: dict[str, Any]) -> None:
+        pass
+
+    def close(self) -> None:
+        pass

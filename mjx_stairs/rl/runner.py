@@ -5,7 +5,9 @@
                -> log (rl.logger) -> save (rl.checkpointer)
 
 until ``train.total_iterations`` (rounded up to whole chunks), ``max_env_steps``, the
-``time_budget_s`` or a signal. The run directory,
+``time_budget_s`` or a signal. With several processes (rl.distributed) every process runs this
+loop on its own devices; they agree on the run directory (process 0's) and on when to stop, and
+only process 0 logs and writes files. The run directory,
 ``<log_dir>/<experiment>__<seed>__<YYYYmmdd-HHMMSS>/``::
 
     config.json                  the whole config (JSON of the dataclasses)
@@ -28,7 +30,8 @@ from typing import Any, Callable, NamedTuple
 import jax
 from jax.sharding import Mesh
 
-from mjx_stairs.rl import checkpoint, logger
+from mjx_stairs import atomic
+from mjx_stairs.rl import checkpoint, distributed, logger
 from mjx_stairs.rl.checkpointer import Checkpointer, load_state
 from mjx_stairs.rl.policy import config_dict
 from mjx_stairs.rl.trainer import (
@@ -103,7 +106,8 @@ def run(
     resume: True -> continue from the newest ``<run_dir>/checkpoints/state_*.npz``; a path ->
       continue from that state file (e.g. one carried from another machine), logging into
       ``run_dir`` (a new run directory when None).
-    on_chunk(record): called after each chunk with the logged record; returning True stops.
+    on_chunk(record): called after each chunk with the logged record; returning True stops
+      (on every process: each one's metrics are the same global values).
     """
     t_start = time.time()
     tc = config.train
@@ -115,15 +119,13 @@ def run(
     K, steps_per_iter = tc.iterations_per_chunk, tc.num_envs * tc.unroll_length
     target = -(-tc.total_iterations // K) * K
     saver = Checkpointer(run_dir, config, trainer, iteration if resume is True else -1)
-    log = logger.RunLogger(run_dir, steps_per_iteration=steps_per_iter, iteration=iteration,
-                           target_iteration=target, tensorboard=tc.tensorboard,
-                           progress=tc.progress, console=tc.console)
+    log = _logger(run_dir, tc, steps_per_iter, iteration, target)
     record: dict[str, Any] = {}
-    chunk_s = 0.0
+    chunk_s, asked = 0.0, ""
     try:
         with _StopFlag() as flag:
-            while not (stop := _stop_reason(tc, iteration, target, t_start, chunk_s,
-                                            saver.save_s, flag.reason)):
+            while not (stop := distributed.agree(asked or _stop_reason(
+                    tc, iteration, target, t_start, chunk_s, saver.save_s, flag.reason))):
                 t = time.time()
                 state, metrics = compiled(state)  # K x (rollout -> GAE -> PPO update)
                 metrics = {k: float(v) for k, v in jax.device_get(metrics).items()}
@@ -136,13 +138,12 @@ def run(
                 log.log(record)
                 saver.after_chunk(state)
                 if on_chunk is not None and on_chunk(record):
-                    stop = "on_chunk"
-                    break
+                    asked = "on_chunk"
             saver.finish(state, iteration)
     finally:
         log.close()
-    print(f"stopped ({stop}) at iteration {iteration}, {iteration * steps_per_iter:,} env steps; "
-          f"run dir {run_dir}", flush=True)
+    _say(f"stopped ({stop}) at iteration {iteration}, {iteration * steps_per_iter:,} env steps; "
+         f"run dir {run_dir}")
     return RunResult(run_dir, state, record, stop)
 
 
@@ -162,7 +163,21 @@ def _stop_reason(tc, iteration: int, target: int, t_start: float, chunk_s: float
 
 
 def _run_dir(tc, run_dir: str | Path | None, resume: bool | str | Path) -> Path:
-    """The given run directory, the newest of this experiment and seed (resume=True), or new."""
+    """The given run directory, the newest of this experiment and seed (resume=True), or new;
+    process 0 chooses and creates it, the others take its choice."""
+    chosen = ""
+    if distributed.is_main():
+        try:
+            chosen = str(_choose_run_dir(tc, run_dir, resume))
+        except FileNotFoundError as e:
+            chosen = f"\0{e}"
+    chosen = distributed.main_text(chosen)
+    if chosen.startswith("\0"):
+        raise FileNotFoundError(chosen[1:])
+    return Path(chosen)
+
+
+def _choose_run_dir(tc, run_dir: str | Path | None, resume: bool | str | Path) -> Path:
     if run_dir is None:
         if resume is True:
             run_dir = logger.latest_run_dir(tc.log_dir, tc.experiment, tc.seed)
@@ -179,7 +194,8 @@ def _run_dir(tc, run_dir: str | Path | None, resume: bool | str | Path) -> Path:
 
 def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -> TrainState:
     """The state to train from: resumed from a checkpoint, or fresh (params and normaliser from
-    ``config.init_from`` when set); a fresh run writes config.json."""
+    ``config.init_from`` when set); a fresh run writes config.json (process 0)."""
+    main = distributed.is_main()
     if resume:
         ckpt_dir = run_dir / "checkpoints"
         path = checkpoint.latest_checkpoint(ckpt_dir) if resume is True else Path(resume)
@@ -187,16 +203,33 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
         state, meta = load_state(path, trainer)
         diff = _config_diff(meta.get("config", {}), config_dict(config))
-        if diff:
+        if diff and main:
             warnings.warn(f"resuming {path} with a changed config: {'; '.join(diff)}",
                           stacklevel=3)
-        logger.truncate_jsonl(run_dir / "metrics.jsonl", int(meta["iteration"]))
-        print(f"resumed {path} at iteration {meta['iteration']}", flush=True)
+        if main:
+            logger.truncate_jsonl(run_dir / "metrics.jsonl", int(meta["iteration"]))
+        _say(f"resumed {path} at iteration {meta['iteration']}")
         return state
     state = trainer.init(jax.random.PRNGKey(config.train.seed))
     init_from = getattr(config, "init_from", "")
     if init_from:
         state = start_from_policy(state, init_from, trainer)
-        print(f"initialised params and normaliser from {init_from}", flush=True)
-    (run_dir / "config.json").write_text(json.dumps(config_dict(config), indent=2))
+        _say(f"initialised params and normaliser from {init_from}")
+    if main:
+        atomic.write_text(run_dir / "config.json", json.dumps(config_dict(config), indent=2))
     return state
+
+
+def _logger(run_dir: Path, tc, steps_per_iter: int, iteration: int, target: int):
+    """The run's RunLogger on process 0, a SilentLogger elsewhere."""
+    if not distributed.is_main():
+        return logger.SilentLogger()
+    return logger.RunLogger(run_dir, steps_per_iteration=steps_per_iter, iteration=iteration,
+                            target_iteration=target, tensorboard=tc.tensorboard,
+                            progress=tc.progress, console=tc.console)
+
+
+def _say(text: str) -> None:
+    """Print on process 0 only."""
+    if distributed.is_main():
+        print(text, flush=True)

@@ -10,7 +10,9 @@
 
 ``config`` is any object with attributes ``ppo`` (PPOConfig), ``network`` (NetworkConfig) and
 ``train`` (TrainConfig), e.g. ``LearnerConfig`` below or study.experiment's ExperimentConfig.
-The env is described in rl.rollout; robots are split over the local devices (rl.sharding).
+The env is described in rl.rollout; robots are split over the devices of every process
+(rl.sharding, rl.distributed), and every reduction over them is global: one batch of
+``num_envs`` robots trains the same on one device, several, or several processes.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from mjx_stairs.rl.networks import NetworkConfig, ObsLayout
 from mjx_stairs.rl.policy import OBS_KEYS
 from mjx_stairs.rl.ppo import PPOConfig
 from mjx_stairs.rl.rollout import Transition, obs_layout, rollout
-from mjx_stairs.rl.sharding import batched, constrain, make_mesh, replicated
+from mjx_stairs.rl.sharding import batched, constrain, make_mesh, put_global, replicated
 
 
 @dataclass(frozen=True)
@@ -334,6 +336,6 @@ def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer) -> 
         raise checkpoint.CheckpointError(
             f"{path}: policy shapes do not fit this experiment's network and observation layout"
         )
-    params = jax.device_put(saved.params, trainer.sharding.params)
-    norm = jax.device_put(saved.normalizer, trainer.sharding.normalizer)
+    params = put_global(saved.params, trainer.sharding.params)
+    norm = put_global(saved.normalizer, trainer.sharding.normalizer)
     return state._replace(params=params, normalizer=norm)

@@ -142,6 +142,7 @@ def publish(run_dir: str | Path, dest: str | Path, record: dict[str, Any], stop:
         "run_dir": str(run_dir),
         "device": jax.devices()[0].device_kind,
         "devices": len(jax.devices()),
+        "processes": jax.process_count(),
         "backend": jax.default_backend(),
         "host": platform.node(),
         "jax": jax.__version__,
