@@ -19,8 +19,8 @@ Steps, each writing JSON under OUT as soon as it is complete and skipped when it
          with the same cases in code_stage2_u.json
   table  (no GPU) OUT/code_suite.md from the files present: success / falls per case and policy,
          the U level 3 comparison and the together-or-alone comparison
-Every evaluation runs in the evaluation env of mjx_stairs.study.evaluate.eval_env, with --env
-added (the default: the reference physics, in which every published number is measured).
+Every evaluation runs in the evaluation env of mjx_stairs.study.evaluate.eval_env: the
+evaluation physics (specs.EVAL_PHYSICS, issue 19), with --env added.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ POLICIES = {  # the committed policies the README cites
 MESH_POLICIES = ("stage2_u", "stage2_u_lean")
 ALONE = ("code_commercial_straight_up", "code_commercial_u_left_down",
          "code_residential_spiral_ccw_up", "code_residential_winder_left_down")
-EVAL_PHYSICS = ("robot.physics=reference",)
+EVAL_PHYSICS: tuple[str, ...] = ()  # none: the evaluation physics preset (specs.EVAL_PHYSICS)
 
 
 def write(path: Path, record: dict) -> None:
@@ -57,7 +57,8 @@ def facts(spec, t0: float, **extra) -> dict:
 
     return {"robots_per_case": spec.robots_per_level, "episode_length_s": spec.episode_length_s,
             "seed": spec.seed, "resolution": spec.resolution,
-            "env_overrides": list(spec.env_overrides), "device": jax.devices()[0].device_kind,
+            "eval_physics": spec.physics, "env_overrides": list(spec.env_overrides),
+            "device": jax.devices()[0].device_kind,
             "wall_s_with_compile": time.time() - t0, **extra}
 
 
@@ -117,7 +118,8 @@ def run_mesh(out: Path, spec) -> None:
         cell = evaluate.CellSpec(cells=(("u_shaped", "test", 2),),
                                  robots_per_cell=spec.robots_per_level,
                                  episode_length_s=spec.episode_length_s, seed=spec.seed,
-                                 resolution=spec.resolution, env_overrides=spec.env_overrides)
+                                 resolution=spec.resolution, physics=spec.physics,
+                                 env_overrides=spec.env_overrides)
         for name, r in evaluate.success_by_cell(policies, cell).items():
             print(f"{name} eval --family u_shaped --levels 3: {100 * r['success'][0]:.1f} %")
             write(out / f"u3_family_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),

@@ -38,6 +38,7 @@ OPTIONS = {  # env overrides of each physics option
                 "robot.ls_iterations=5"),
     "columns_converged": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
                           "robot.solver_iterations=8", "robot.ls_iterations=10"),
+    "evaluation": ("robot.physics=evaluation",),  # the named preset: columns_converged
 }
 CELLS = (
     [("u_shaped", "test", lv) for lv in range(6)]
@@ -64,7 +65,7 @@ def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float)
     for name in options:
         t0 = time.time()
         spec = CellSpec(cells=tuple(cells), robots_per_cell=robots, env_overrides=OPTIONS[name],
-                        resolution=res)
+                        resolution=res, physics="trained")
         result = success_by_cell(policies, spec)
         tag = "_x64" if jax.config.jax_enable_x64 else ""
         record = {"option": name + tag, "device": jax.devices()[0].device_kind,

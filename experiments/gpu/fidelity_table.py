@@ -40,7 +40,7 @@ def main(root: Path) -> None:
     print("|---|---|---|" + "---|" * len(options))
     worst = {o: (0.0, 0) for o in options}
     for policy, rec in mjx["reference"]["policies"].items():
-        for i, c in enumerate(rec["cells"]):
+        for c in rec["cells"]:
             key = (policy, c["family"], c["schedule"], c["level"])
             g, n = gt.get(key, (None, 0))
             cells = []

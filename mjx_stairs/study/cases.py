@@ -138,7 +138,7 @@ def evaluate_cases(checkpoints: Sequence[str | os.PathLike], cases: Sequence[Cas
     result = {"source": source, "cases": len(cases), "robots_per_case": spec.robots_per_level,
               "episode_length_s": spec.episode_length_s, "seed": spec.seed,
               "resolution": spec.resolution, "tile_size": atlas_side,
-              "env_overrides": list(spec.env_overrides),
+              "eval_physics": spec.physics, "env_overrides": list(spec.env_overrides),
               "device": jax.devices()[0].device_kind, "results": records}
     if out is not None:
         atomic.write_text(out, json.dumps(result, indent=1))
@@ -150,7 +150,7 @@ def by_env(policies: dict[str, Policy], spec: EvalSpec) -> list[dict[str, Policy
     """The policies grouped by their evaluation env config (in order of first appearance)."""
     groups: list[tuple[Any, dict[str, Policy]]] = []
     for name, p in policies.items():
-        cfg = evaluate.env_config_of(p, spec.env_overrides)
+        cfg = evaluate.env_config_of(p, evaluate.physics_overrides(spec))
         for c, g in groups:
             if c == cfg:
                 g[name] = p

@@ -24,7 +24,7 @@ from mjx_stairs import atomic
 from mjx_stairs.env.config import EnvConfig, env_config_from, evaluation_config
 from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config
-from mjx_stairs.study.specs import EvalSpec
+from mjx_stairs.study.specs import EVAL_PHYSICS, EvalSpec
 
 
 def env_config_of(policy: Policy, overrides: Sequence[str] = ()) -> EnvConfig:
@@ -39,8 +39,17 @@ def eval_env(policy: Policy, atlas: Any, spec: Any) -> StairEnv:
     `spec.env_overrides` applied, in evaluation settings (no noise, no randomisation, no
     trunk-contact ending, no curriculum), episodes of `spec.episode_length_s`; `spec` is an
     EvalSpec, CellSpec or tools' PlaySpec."""
-    cfg = evaluation_config(env_config_of(policy, spec.env_overrides), spec.episode_length_s)
+    cfg = evaluation_config(env_config_of(policy, physics_overrides(spec)),
+                            spec.episode_length_s)
     return StairEnv(atlas, cfg)
+
+
+def physics_overrides(spec: Any) -> tuple[str, ...]:
+    """The env overrides an evaluation runs with: the spec's physics preset (default
+    specs.EVAL_PHYSICS; "trained": the policy's own), then `spec.env_overrides`."""
+    physics = getattr(spec, "physics", EVAL_PHYSICS)
+    preset = () if physics == "trained" else (f"robot.physics={physics}",)
+    return preset + tuple(spec.env_overrides)
 
 
 def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[StairEnv, Any]:
@@ -113,6 +122,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
         "seed": spec.seed,
         "wall_s": wall,
         "device": jax.devices()[0].device_kind,
+        "eval_physics": spec.physics,
         **({"env_overrides": list(spec.env_overrides)} if spec.env_overrides else {}),
     }
 
@@ -134,6 +144,7 @@ class CellSpec:
     seed: int = 0
     resolution: float = 0.025
     tile_size: float = 10.0
+    physics: str = EVAL_PHYSICS  # see EvalSpec
     env_overrides: tuple[str, ...] = ()  # see EvalSpec
 
 
@@ -172,6 +183,7 @@ def cell_records(spec: CellSpec, success: np.ndarray, fell: np.ndarray, **extra)
         "robots_per_cell": spec.robots_per_cell,
         "episode_length_s": spec.episode_length_s,
         "seed": spec.seed,
+        "eval_physics": spec.physics,
         "env_overrides": list(spec.env_overrides),
         **extra,
     }
@@ -181,9 +193,9 @@ def check_same_env(policies: dict[str, Policy], spec: EvalSpec | CellSpec) -> No
     """ValueError unless every policy's evaluation env config (with the overrides) is the
     first's: one compiled program serves them all."""
     first = next(iter(policies))
-    want = env_config_of(policies[first], spec.env_overrides)
+    want = env_config_of(policies[first], physics_overrides(spec))
     for name, p in policies.items():
-        if env_config_of(p, spec.env_overrides) != want:
+        if env_config_of(p, physics_overrides(spec)) != want:
             raise ValueError(f"policy {name!r} needs another env than {first!r}")
 
 

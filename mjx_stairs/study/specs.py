@@ -7,6 +7,10 @@ import dataclasses
 from dataclasses import field
 from typing import Literal
 
+EVAL_PHYSICS = "evaluation"
+"""The physics preset (sim.robot.PHYSICS) every evaluation runs in unless told otherwise,
+whatever physics the policy trained in; "trained" keeps the policy's own."""
+
 
 @dataclasses.dataclass(frozen=True)
 class EvalSpec:
@@ -29,6 +33,10 @@ class EvalSpec:
     seed: int = field(default=0, metadata={"help": "seed of the robots' resets"})
     resolution: float = field(default=0.025, metadata={"help": "terrain grid (m)"})
     tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
+    physics: str = field(
+        default=EVAL_PHYSICS,
+        metadata={"help": "physics preset to evaluate in: evaluation (default), reference, lean, "
+                  "or trained (the policy's own)"})
     env_overrides: tuple[str, ...] = field(
         default=(),
         metadata={"flag": "--env", "metavar": "KEY=VALUE",
