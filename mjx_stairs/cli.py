@@ -14,6 +14,7 @@ from typing import Any
 
 from mjx_stairs.config import ConfigError
 from mjx_stairs.rl.checkpoint import CheckpointError
+from mjx_stairs.study.cli_flags import flag_cases, glued_poses, mesh_flags
 from mjx_stairs.study.specs import EvalSpec
 from mjx_stairs.tools import sim2sim_cli
 from mjx_stairs.tools.specs import PlaySpec
@@ -132,36 +133,11 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     return 0
 
 
-def mesh_flags(parser: argparse.ArgumentParser, suite: bool = False) -> None:
-    """--mesh FILE --start --goal [--route] (and --suite): a staircase other than a family's."""
-    parser.add_argument("--mesh", default=None, help="a staircase mesh (STL, OBJ, PLY; metres, "
-                        "z up) in place of a family")
-    parser.add_argument("--start", default=None, metavar="X,Y[,YAW]",
-                        help="with --mesh: the spawn, mesh frame (m, rad)")
-    parser.add_argument("--goal", default=None, metavar="X,Y[,YAW]",
-                        help="with --mesh: the goal, mesh frame")
-    parser.add_argument("--route", default=None, metavar="FILE.csv",
-                        help="with --mesh: the route the waypoint follows, x,y per line, mesh "
-                        "frame (default: the importer's path, kept in the middle)")
-    if suite:
-        parser.add_argument("--suite", default=None, metavar="DIR|NAME",
-                            help="a folder of cases (NAME.json beside its mesh) or a fixed "
-                            "suite: code, paper (every case up and down)")
-
-
-def mesh_cases(args: argparse.Namespace, resolution: float) -> list | None:
-    """The cases that --mesh or --suite name (study.cases.from_flags), None for neither."""
-    from mjx_stairs.study import cases
-
-    return cases.from_flags(args.mesh, args.start, args.goal, args.route,
-                            getattr(args, "suite", None), resolution)
-
-
 def cmd_eval(args: argparse.Namespace) -> int:
     from mjx_stairs.study import evaluate
 
     spec = spec_from(EvalSpec, args)
-    found = mesh_cases(args, spec.resolution)
+    found = flag_cases(args, spec.resolution)
     if found is None:
         evaluate.evaluate(args.checkpoint, args.families, spec, args.out)
         return 0
@@ -175,7 +151,7 @@ def cmd_critic_map(args: argparse.Namespace) -> int:
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study import critic_map, plots
 
-    found = mesh_cases(args, args.resolution)
+    found = flag_cases(args, args.resolution)
     policy = load_policy(args.checkpoint)
     if found is not None:
         m = critic_map.critic_map_of_tile(policy, found[0][1], EvalSpec(
@@ -221,7 +197,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     from mjx_stairs.tools import play
 
     spec = spec_from(PlaySpec, args)
-    found = mesh_cases(args, spec.resolution)
+    found = flag_cases(args, spec.resolution)
     try:
         play.play(args.checkpoint, spec, video=args.video, mcap=args.mcap, width=args.width,
                   height=args.height, fps=args.fps, case=None if found is None else found[0])
@@ -232,28 +208,9 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.tools import export
 
-    try:
-        policy = load_policy(args.checkpoint)
-        export.export_policy(policy, args.onnx)
-        print(f"wrote {args.onnx} and {export.sidecar_path(args.onnx)}", flush=True)
-        if args.verify:
-            err = export.verify(policy, args.onnx)
-            print(
-                f"onnxruntime vs JAX on 64 random observations: max |diff| = {err:.2e}", flush=True
-            )
-            if err > 1e-5:
-                print(
-                    "mjx-stairs export: error: the ONNX graph does not match the policy",
-                    file=sys.stderr,
-                )
-                return 1
-    except export.ExportError as e:
-        print(f"mjx-stairs export: error: {e}", file=sys.stderr)
-        return 2
-    return 0
+    return export.export_command(args.checkpoint, args.onnx, check=args.verify)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -385,19 +342,8 @@ def _add_tools(sub) -> None:
     sim2sim_cli.add_parser(sub)
 
 
-def _glued_poses(argv: list[str]) -> list[str]:
-    """"--start -1,2" -> "--start=-1,2": argparse takes a value starting with '-' for a flag."""
-    out: list[str] = []
-    for a in argv:
-        if out and out[-1] in ("--start", "--goal") and a[:1] == "-" and a[1:2] in "0123456789.":
-            out[-1] += "=" + a
-        else:
-            out.append(a)
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(_glued_poses(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(glued_poses(sys.argv[1:] if argv is None else argv))
     t0 = time.time()
     try:
         code = args.fn(args)

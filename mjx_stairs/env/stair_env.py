@@ -185,9 +185,8 @@ class StairEnv(Env):
         k_noise, info["rng"] = jax.random.split(info["rng"])
         obs = self.observe(qpos, data.qvel, info, k_noise)
         info["final_obs"] = obs
-        metrics = {k: jnp.zeros((), jnp.float32) for k in self.metric_names()}
         zero = jnp.zeros((), jnp.float32)  # float32 also when the physics runs in float64
-        return State(data, obs, zero, zero, metrics, info)
+        return State(data, obs, zero, zero, {k: zero for k in self.metric_names()}, info)
 
     def _spawn_robot(self, rng: jax.Array, tile: jnp.ndarray) -> tuple[jnp.ndarray, dict]:
         """qpos [19] on the tile's spawn area and this episode's randomisation draws."""
@@ -231,9 +230,8 @@ class StairEnv(Env):
         data, obs, info = self._auto_reset(data, info, final_obs, ends, moved_up, k_reset)
         metrics = endings.metrics(terms, ends, finite, level, self.num_levels - 1,
                                   q.planar_goal_distance, moved_up)
-        metrics = {k: v.astype(jnp.float32) for k, v in metrics.items()}  # also under x64
-        return State(data, obs, reward.astype(jnp.float32), ends.done.astype(jnp.float32),
-                     metrics, info)
+        f32 = lambda x: x.astype(jnp.float32)  # noqa: E731  (also when the physics is float64)
+        return State(data, obs, f32(reward), f32(ends.done), jax.tree.map(f32, metrics), info)
 
     def _actuate(self, data0: mjx.Data, action: jnp.ndarray,
                  info: dict) -> tuple[mjx.Data, jnp.ndarray]:

@@ -206,3 +206,28 @@ def verify(policy: Policy, onnx_path: str | os.PathLike, n: int = 64,
     got = sess.run(["action"], {"obs": obs})[0]
     want = np.asarray(jax.jit(lambda o: policy_action(policy, o))(obs))
     return float(np.max(np.abs(got - want)))
+
+
+def export_command(checkpoint: str, onnx_path: str, check: bool = False) -> int:
+    """`mjx-stairs export`: write the graph and sidecar, optionally check them against JAX on
+    64 random observations; exit status 0, 1 (the graph disagrees) or 2 (bad input)."""
+    import sys
+
+    from mjx_stairs.rl.policy import load_policy
+
+    try:
+        policy = load_policy(checkpoint)
+        export_policy(policy, onnx_path)
+        print(f"wrote {onnx_path} and {sidecar_path(onnx_path)}", flush=True)
+        if check:
+            err = verify(policy, onnx_path)
+            print(f"onnxruntime vs JAX on 64 random observations: max |diff| = {err:.2e}",
+                  flush=True)
+            if err > 1e-5:
+                print("mjx-stairs export: error: the ONNX graph does not match the policy",
+                      file=sys.stderr)
+                return 1
+    except ExportError as e:
+        print(f"mjx-stairs export: error: {e}", file=sys.stderr)
+        return 2
+    return 0
