@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 ORDER = ("reference", "lean", "nearest_full", "mjx_converged", "columns", "columns_converged",
-         "columns_converged_x64")
+         "columns_converged_x64", "evaluation")
 
 
 def _ground_truth(root: Path) -> dict:
@@ -31,7 +31,7 @@ def _ground_truth(root: Path) -> dict:
 def main(root: Path) -> None:
     gt = _ground_truth(root)
     mjx = {}
-    for folder in ("mjx", "mjx_converged", "mjx_columns", "mjx_x64"):
+    for folder in ("mjx", "mjx_converged", "mjx_columns", "mjx_x64", "mjx_eval"):
         for f in sorted((root / folder).glob("mjx_*.json")):
             r = json.loads(f.read_text())
             mjx[r["option"]] = r
