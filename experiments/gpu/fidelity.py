@@ -3,8 +3,13 @@ CPU MuJoCo ground truth (box stairs, default solver), from the same starting sta
 
   python experiments/gpu/fidelity.py mjx OUT [--robots 1000]           # GPU: every option
   JAX_PLATFORMS=cpu python experiments/gpu/fidelity.py gt OUT [--robots 200] [--workers 12]
-Both take --resolution (grid, m) and --cells (indices into CELLS); gt takes --terrain
-boxes|heightfield (heightfield: CPU MuJoCo on the very heightfield MJX sees).
+  JAX_PLATFORMS=cpu python experiments/gpu/fidelity.py first OUT --robots 32 --cells 3,8,15 \
+      --options reference,lean,nearest_full,mjx_converged,columns,evaluation
+All take --resolution (grid, m) and --cells (indices into CELLS); gt takes --terrain
+boxes|heightfield (heightfield: CPU MuJoCo on the very heightfield MJX sees). `first`: from the
+same states on the stairs (the policy's, after 2 s in the ground truth) the same actions for one
+second in the ground truth and, replayed open-loop, in each option (study.ground_truth.
+first_second): base position error and net vertical contact force, per cell and policy.
 
 Both write JSON under OUT (one file per MJX option, one per ground-truth cell), each file as soon
 as it is complete, so a run cut short keeps what it finished.
@@ -102,20 +107,50 @@ def run_gt(out: Path, robots: int, workers: int, cells: list, res: float, terrai
             print("[gt]", line, flush=True)
 
 
+def run_first(out: Path, robots: int, options: list[str], cells: list, res: float,
+              policies: list[str]) -> None:
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study.evaluate import CellSpec
+    from mjx_stairs.study.ground_truth import first_second
+
+    for name in policies:
+        policy = load_policy(POLICIES[name])
+        for cell in cells:
+            path = out / f"first_{name}_{cell[0]}_{cell[1]}_{cell[2] + 1}.json"
+            if path.exists():
+                continue
+            t0 = time.time()
+            spec = CellSpec(cells=(cell,), robots_per_cell=robots, resolution=res,
+                            env_overrides=OPTIONS["reference"], physics="trained")
+            rec = first_second(policy, spec, {o: OPTIONS[o] for o in options})
+            rec.update(policy=name, wall_s=time.time() - t0)
+            write(path, rec)
+            print(f"[first] {path.name} ({time.time() - t0:.0f} s)", flush=True)
+            for o, r in rec["options"].items():
+                print(f"  {o}: base error at 1 s mean {100 * r['pos_error_at_horizon_mean_m']:.2f}"
+                      f" cm, p90 {100 * r['pos_error_at_horizon_p90_m']:.2f} cm; |force diff| "
+                      f"{r['force_abs_diff_mean_n']:.1f} N (GT mean "
+                      f"{rec['gt_mean_vertical_force_n']:.1f} N)", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("mjx", "gt"))
+    ap.add_argument("what", choices=("mjx", "gt", "first"))
     ap.add_argument("out", type=Path)
     ap.add_argument("--robots", type=int, default=None)
     ap.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) - 2))
     ap.add_argument("--options", default="reference,lean,nearest_full")
     ap.add_argument("--resolution", type=float, default=0.025)
     ap.add_argument("--cells", default="", help="comma-separated indices into CELLS; '' = all")
+    ap.add_argument("--policies", default=",".join(POLICIES), help="for first")
     ap.add_argument("--terrain", default="boxes", choices=("boxes", "heightfield"))
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     cells = [CELLS[int(i)] for i in a.cells.split(",")] if a.cells else CELLS
-    if a.what == "mjx":
+    if a.what == "first":
+        run_first(a.out, a.robots or 32, a.options.split(","), cells, a.resolution,
+                  a.policies.split(","))
+    elif a.what == "mjx":
         run_mjx(a.out, a.robots or 1000, a.options.split(","), cells, a.resolution)
     else:
         os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
