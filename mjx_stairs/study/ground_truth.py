@@ -235,25 +235,30 @@ def first_second(
            "cell": {"family": cell[0], "schedule": cell[1], "level": cell[2] + 1},
            "gt_mean_vertical_force_n": float(gt_force.mean()), "options": {}}
     for name, overrides in options.items():
-        pos, force = replay_in_mjx(policy, dataclasses.replace(spec, env_overrides=tuple(
+        pos, force, done = replay_in_mjx(policy, dataclasses.replace(spec, env_overrides=tuple(
             overrides)), start, actions)
-        err = np.linalg.norm(pos - gt_pos, axis=-1)  # [T, B]
+        # A robot whose MJX episode ended (a fall) is reset by the env: compared until then.
+        ended = np.cumsum(done, axis=0) > 0  # [T, B]
+        err = np.where(ended, np.nan, np.linalg.norm(pos - gt_pos, axis=-1))  # [T, B]
+        df = np.where(ended, np.nan, np.abs(force - gt_force))
         out["options"][name] = {
             "overrides": list(overrides),
-            "pos_error_mean_m": [float(e) for e in err.mean(1)],
-            "pos_error_p90_m": [float(e) for e in np.percentile(err, 90, axis=1)],
-            "pos_error_at_horizon_mean_m": float(err[-1].mean()),
-            "pos_error_at_horizon_p90_m": float(np.percentile(err[-1], 90)),
-            "force_abs_diff_mean_n": float(np.abs(force - gt_force).mean()),
-            "mean_vertical_force_n": float(force.mean()),
+            "pos_error_mean_m": [float(e) for e in np.nanmean(err, 1)],
+            "pos_error_p90_m": [float(e) for e in np.nanpercentile(err, 90, axis=1)],
+            "pos_error_at_horizon_mean_m": float(np.nanmean(err[-1])),
+            "pos_error_at_horizon_p90_m": float(np.nanpercentile(err[-1], 90)),
+            "pos_error_at_horizon_max_m": float(np.nanmax(err[-1])),
+            "force_abs_diff_mean_n": float(np.nanmean(df)),
+            "mean_vertical_force_n": float(np.nanmean(np.where(ended, np.nan, force))),
+            "episodes_ended_in_mjx": int(ended[-1].sum()),
         }
     return out
 
 
 def replay_in_mjx(policy: Policy, spec: CellSpec, start, actions):
-    """Positions [T, B, 3] and net vertical contact forces [T, B] in the MJX physics of `spec`'s
-    overrides, replaying `actions` [T][B, 12] from `start` = (qpos, qvel, last action) on the
-    tiles the spec's seed places its robots on."""
+    """Positions [T, B, 3], net vertical contact forces [T, B] and episode ends [T, B] in the
+    MJX physics of `spec`'s overrides, replaying `actions` [T][B, 12] from `start` = (qpos, qvel,
+    last action) on the tiles the spec's seed places its robots on."""
     env = cell_env(policy, spec)
     state0 = initial_states(env, spec)
     qpos, qvel, last = start
@@ -264,8 +269,8 @@ def replay_in_mjx(policy: Policy, spec: CellSpec, start, actions):
     def one(s, a):
         s = jax.vmap(env.step)(s, a)
         force = jax.vmap(lambda d: _mjx_vertical_force(env, d))(s.pipeline_state)
-        return s, (s.pipeline_state.qpos[:, :3], force)
+        return s, (s.pipeline_state.qpos[:, :3], force, s.done > 0)
 
-    _, (pos, force) = jax.jit(lambda s, a: jax.lax.scan(one, s, a))(
+    _, (pos, force, done) = jax.jit(lambda s, a: jax.lax.scan(one, s, a))(
         st, jnp.asarray(np.stack(actions)))
-    return np.asarray(pos, np.float64), np.asarray(force, np.float64)
+    return np.asarray(pos, np.float64), np.asarray(force, np.float64), np.asarray(done)
