@@ -1,6 +1,7 @@
 """A user's staircase mesh (OBJ / STL / GLB / PLY) -> Tile: the height grid by casting rays
 straight down (terrains.raycast), the start and the goal from the user, the centre-line the
-shortest walkable path between them, kept away from walls.
+shortest walkable path between them, kept away from walls, crossing landings through their
+middles and reaching (and leaving) the flights at either end along their axes (terrains.approach).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ import os
 
 import numpy as np
 
+from .approach import approach, grow, min_on
 from .path import Line, resample
 from .raycast import IMPORT_FORMATS, MAX_EXTENT, height_grid, load_mesh, raycast_down
 from .tile import CENTRELINE_POINTS, HEIGHT_QUANTUM, SPAWN_MARGIN, Tile, sample_heights
@@ -137,20 +139,7 @@ def _trace(parent: np.ndarray, goal_ij: tuple[int, int]) -> np.ndarray:
 
 def _patch(seed_ij: tuple[int, int], h: np.ndarray, large: np.ndarray) -> np.ndarray:
     """[ny, nx] bool: the large flat patch of equal height holding ``seed_ij``."""
-    z = h[seed_ij]
-    ok = large & (h == z)
-    m = np.zeros(h.shape, bool)
-    m[seed_ij] = True
-    while True:
-        g = m.copy()
-        g[1:] |= m[:-1]
-        g[:-1] |= m[1:]
-        g[:, 1:] |= m[:, :-1]
-        g[:, :-1] |= m[:, 1:]
-        g &= ok
-        if np.array_equal(g, m):
-            return m
-        m = g
+    return grow(seed_ij, large & (h == h[seed_ij]))
 
 
 def through_landings(cells: np.ndarray, h: np.ndarray, d_flat: np.ndarray, large: np.ndarray,
@@ -185,22 +174,12 @@ def through_landings(cells: np.ndarray, h: np.ndarray, d_flat: np.ndarray, large
         piece = np.array([e, re, rx, x])
         closest = 0.0 if clear is None else clear[cells[i:j + 1, 0], cells[i:j + 1, 1]].min()
         if _on_patch(piece, patch, resolution) and (
-                clear is None or _min_on(piece, clear, resolution) >= 0.8 * closest):
+                clear is None or min_on(piece, clear, resolution) >= 0.8 * closest):
             out.append(piece)
         else:
             out.append(xy[i:j + 1])
         i = j + 1
     return out
-
-
-def _min_on(piece: np.ndarray, field: np.ndarray, resolution: float) -> float:
-    """Smallest value of ``field`` at the grid points nearest the polyline [k, 2]."""
-    pts = []
-    for a, b in zip(piece[:-1], piece[1:], strict=True):
-        n = max(int(np.ceil(np.hypot(*(b - a)) / (resolution / 2))), 1)
-        pts.append(a + (b - a) * (np.arange(n + 1) / n)[:, None])
-    ij = np.round(np.concatenate(pts)[:, ::-1] / resolution).astype(int)
-    return float(field[ij[:, 0], ij[:, 1]].min())
 
 
 def _on_patch(piece: np.ndarray, patch: np.ndarray, resolution: float) -> bool:
@@ -212,6 +191,24 @@ def _on_patch(piece: np.ndarray, patch: np.ndarray, resolution: float) -> bool:
         if not patch[ij[:, 0], ij[:, 1]].all():
             return False
     return True
+
+
+def route_points(cells: np.ndarray, h: np.ndarray, resolution: float, max_step: float,
+                 start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """The searched route cells [m, 2] (iy, ix) -> [k, 2] xy from ``start`` to ``goal``: at
+    either end along the flight's axis where approach() finds one, through_landings between."""
+    clear, d_flat, large = _fields(h, resolution, max_step)
+    n = len(cells)
+    head = approach(cells, h, large, clear, resolution, start)
+    tail = approach(cells[::-1], h, large, clear, resolution, goal)
+    lo = head[1] if head else 0
+    if tail and n - tail[1] <= lo:       # one short flight: its axis from the start suffices
+        tail = None
+    hi = n - tail[1] if tail else n
+    mid = np.concatenate(through_landings(cells[lo:hi], h, d_flat, large, resolution, clear))
+    first = head[0] if head else [start]
+    last = tail[0][::-1] if tail else [goal]
+    return np.concatenate([first, mid[0 if head else 1:len(mid) if tail else -1], last])
 
 
 def _simplify(pts: np.ndarray, tol: float) -> np.ndarray:
@@ -255,12 +252,9 @@ def import_mesh(path: str | os.PathLike, start: tuple[float, float], goal: tuple
     if not np.isfinite(dist[g_ij]):
         raise ValueError(f"{path}: no walkable route: goal {tuple(goal)} cannot be reached from "
                          f"start {tuple(start)} stepping at most {max_step} m")
-    clear, d_flat, large = _fields(h, resolution, max_step)
-    pieces = through_landings(_trace(parent, g_ij), h.astype(np.float64), d_flat, large,
-                              resolution, clear)
-    cells = np.concatenate(pieces)                               # [m, 2] tile-frame xy
     s_xy, g_xy = np.asarray(start, float) - o, np.asarray(goal, float) - o
-    pts = _simplify(np.concatenate([[s_xy], cells[1:-1], [g_xy]]), resolution / 2)
+    pts = _simplify(route_points(_trace(parent, g_ij), h.astype(np.float64), resolution,
+                                 max_step, s_xy, g_xy), resolution / 2)
     pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
     xy = resample([Line(tuple(p), tuple(q)) for p, q in zip(pts[:-1], pts[1:], strict=True)],
                   CENTRELINE_POINTS)
