@@ -106,16 +106,17 @@ def test_transfer_matrix_and_transferability(trained, tmp_path):
     env, _ = evaluate.make_eval_env(policy, nearest)
     assert env.config.robot.terrain_contacts == "nearest" and env.num_contacts == 32
     # the matrix passes them to every evaluation and records them. An override that restates
-    # the policy's own collider keeps the program of test_eval_and_exp1_report (TINY on
+    # the evaluation physics' collider keeps the program of test_eval_and_exp1_report (TINY on
     # u_shaped), which the session's compilation cache then serves without compiling it again
-    spec = dataclasses.replace(TINY, env_overrides=("robot.terrain_contacts=mjx",))
-    assert evaluate.env_config_of(policy, spec.env_overrides) == evaluate.env_config_of(policy)
+    spec = dataclasses.replace(TINY, env_overrides=("robot.terrain_contacts=columns",))
+    assert evaluate.env_config_of(policy, evaluate.physics_overrides(spec)) == (
+        evaluate.env_config_of(policy, evaluate.physics_overrides(TINY)))
     result = transfer.matrix({"u_shaped": path}, spec, tmp_path)
     assert result["levels"] == [1, 6]
-    assert result["env_overrides"] == ["robot.terrain_contacts=mjx"]
+    assert result["env_overrides"] == ["robot.terrain_contacts=columns"]
     assert result["success"]["u_shaped"]["u_shaped"]["env_overrides"] == list(spec.env_overrides)
     md = (tmp_path / "transfer.md").read_text()
-    assert "Transferability" in md and "evaluated with robot.terrain_contacts=mjx" in md
+    assert "Transferability" in md and "evaluated with robot.terrain_contacts=columns" in md
     with pytest.raises(Exception, match="unknown stair family"):
         bad = tmp_path / "bad.toml"
         bad.write_text('[models]\nzigzag = "x.npz"\n')
