@@ -20,16 +20,20 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from mjx_stairs.tools import play  # noqa: E402
-from mjx_stairs.atomic import atomic_path  # noqa: E402  (play sets MUJOCO_GL before mujoco is imported)
+from mjx_stairs.tools import play  # noqa: E402  (first: it sets MUJOCO_GL before mujoco is imported)
+
+# isort: split
+from mjx_stairs.atomic import atomic_path  # noqa: E402
 
 
 def fresh_policy(path: Path, seed: int = 0) -> None:
     """An untrained policy: trainer.init of a small config, written with save_policy."""
     import jax
 
-    from mjx_stairs import experiment, train
     from mjx_stairs.config import apply_overrides, from_dict
+    from mjx_stairs.rl import checkpointer
+    from mjx_stairs.rl import trainer as trainer_lib
+    from mjx_stairs.study import experiment
 
     data = apply_overrides({}, [
         'terrain.families=["u_shaped"]', "terrain.levels=[0]", "terrain.variants_per_family=1",
@@ -37,9 +41,9 @@ def fresh_policy(path: Path, seed: int = 0) -> None:
     ])
     config = from_dict(experiment.ExperimentConfig, data)
     env = experiment.make_env(config)
-    trainer = train.build_trainer(config, env)
+    trainer = trainer_lib.build_trainer(config, env)
     state = trainer.init(jax.random.PRNGKey(seed))
-    train.save_policy(path, state, config, trainer.layout)
+    checkpointer.save_policy(path, state, config, trainer.layout)
 
 
 def plot_mcap(mcap_path: Path, out: Path, title: str) -> None:
@@ -154,8 +158,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from PIL import Image
 
-    from mjx_stairs.tools import mcap_log
     from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.tools import mcap_log
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

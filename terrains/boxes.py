@@ -66,7 +66,14 @@ def grid_boxes(
     for run, y0 in open_runs.items():
         boxes.append((run[0], run[1], y0, ny, run[2]))
 
-    b = np.array(boxes, np.float64).reshape(-1, 5)
+    return _centred(np.array(boxes, np.float64).reshape(-1, 5), resolution, origin, quantum,
+                    bottom)
+
+
+def _centred(b: np.ndarray, resolution: float, origin: tuple[float, float], quantum: float,
+             bottom: float) -> np.ndarray:
+    """Grid boxes ``b`` [M, 5] (x0, x1, y0, y1, level; [x0, x1) in cells) as [M, 6] (cx, cy, cz,
+    hx, hy, hz) in metres from ``bottom`` up to level * quantum, sorted by y then x."""
     x0, y0 = origin
     lo_x = x0 + (b[:, 0] - 0.5) * resolution
     hi_x = x0 + (b[:, 1] - 0.5) * resolution

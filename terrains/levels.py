@@ -9,7 +9,7 @@ A level is a small frozen dataclass of the staircase's dimensions. Three schedul
 - ``extended``: past the paper toward building-code stairs (risers up to 0.20 m, treads down to
   0.25 m, widths down to 0.9 m).
 
-The ``building`` family (real indoor staircases, terrains/building.py) has levels that are
+The ``building`` family (real indoor staircases, terrains/building/) has levels that are
 RANGES (``BuildingLevel``): every tile samples its own staircase inside them. Its train levels
 are ordered by the difficulty index (riser band first, then narrower width, shallower landings,
 tighter curvature, open sides); ``test`` has the same bands (tiles use other seeds),

@@ -1,4 +1,4 @@
-"""The ``building`` family: real indoor staircases (terrains/building.py), one sampled per tile.
+"""The ``building`` family: real indoor staircases (terrains/building/), one sampled per tile.
 
 Variants are the shapes and turns (``building.VARIANTS``); a level is a ``BuildingLevel`` of
 ranges; the staircase of a tile is drawn from a seed fixed by (schedule, level, variant, seed),

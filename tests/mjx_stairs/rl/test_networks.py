@@ -140,8 +140,10 @@ def test_fused_actor_critic_equals_separate_passes():
     obs = jax.random.normal(k1, (7, N_VEC + 441))
     critic_obs = jax.random.normal(k2, (7, N_VEC + 441))
     mean, value = jax.jit(networks.actor_critic, static_argnums=3)(p, obs, critic_obs, layout)
-    np.testing.assert_allclose(mean, networks.actor_mean(p, obs, layout), atol=1e-5)
-    np.testing.assert_allclose(value, networks.value(p, critic_obs, layout), atol=1e-5)
+    np.testing.assert_allclose(mean, jax.jit(networks.actor_mean, static_argnums=2)(
+        p, obs, layout), atol=1e-5)
+    np.testing.assert_allclose(value, jax.jit(networks.value, static_argnums=2)(
+        p, critic_obs, layout), atol=1e-5)
 
     def fused(p):
         m, v = networks.actor_critic(p, obs, critic_obs, layout)
@@ -151,7 +153,7 @@ def test_fused_actor_critic_equals_separate_passes():
         return jnp.sum(networks.actor_mean(p, obs, layout) ** 2) + jnp.sum(
             networks.value(p, critic_obs, layout))
 
-    ga, gb = jax.grad(fused)(p), jax.grad(separate)(p)
+    ga, gb = jax.jit(jax.grad(fused))(p), jax.jit(jax.grad(separate))(p)
     for a, b in zip(jax.tree_util.tree_leaves(ga), jax.tree_util.tree_leaves(gb), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
 

@@ -234,7 +234,8 @@ def test_stops_on_env_steps_and_time_budget(tmp_path):
 
 DEVICES_SCRIPT = textwrap.dedent("""
     import os, sys
-    os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+    flags = os.environ.get("XLA_FLAGS", "")  # the session's (tests/conftest.py), plus 2 devices
+    os.environ["XLA_FLAGS"] = flags + " --xla_force_host_platform_device_count=2"
     os.environ["JAX_PLATFORMS"] = "cpu"
     sys.path.insert(0, {root!r})
     import jax, numpy as np

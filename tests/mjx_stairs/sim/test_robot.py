@@ -22,23 +22,37 @@ RES = 0.05
 SIM_STEPS = 400  # 2 s at 5 ms
 
 
-def _hold_pose(model: mujoco.MjModel, qpos0: np.ndarray, steps: int):
-    """Run MJX with PD holding the nominal pose; returns qpos [steps, 19] and final MJX data."""
-    mx = mjx.put_model(model)
-    ids = rb.robot_ids(model)
+HOLD_CHUNK = 20  # steps per compiled call: every model of one collider shares one program
+
+
+@jax.jit
+def _hold_chunk(mx, d, qpos_joints, qvel_joints):
+    """HOLD_CHUNK MJX steps with PD holding the nominal pose; the model is an argument, so
+    models that differ only in their heights share the compiled program."""
     limit = jnp.asarray(rb.TORQUE_LIMIT)
     target = jnp.asarray(rb.NOMINAL_JOINT_POS)
 
     def sub(d, _):
-        tau = rb.pd_torque(
-            target, d.qpos[ids.qpos_joints], d.qvel[ids.qvel_joints], 35.0, 1.0, limit
-        )
+        tau = rb.pd_torque(target, d.qpos[qpos_joints], d.qvel[qvel_joints], 35.0, 1.0, limit)
         d = mjx.step(mx, d.replace(ctrl=tau))
         return d, d.qpos
 
-    d0 = mjx.make_data(mx).replace(qpos=jnp.asarray(qpos0))
-    d, traj = jax.jit(lambda d: jax.lax.scan(sub, d, None, length=steps))(d0)
-    return np.asarray(traj), d
+    return jax.lax.scan(sub, d, None, length=HOLD_CHUNK)
+
+
+def _hold_pose(model: mujoco.MjModel, qpos0: np.ndarray, steps: int):
+    """Run MJX with PD holding the nominal pose; returns qpos [steps, 19] and final MJX data."""
+    assert steps % HOLD_CHUNK == 0, steps
+    ids = rb.robot_ids(model)
+    mx = mjx.put_model(model)
+    d = mjx.make_data(mx).replace(qpos=jnp.asarray(qpos0))
+    # every input committed to the device, as the outputs fed back are: one program, not two
+    mx, d, joints = jax.device_put((mx, d, (ids.qpos_joints, ids.qvel_joints)), jax.devices()[0])
+    traj = []
+    for _ in range(steps // HOLD_CHUNK):
+        d, q = _hold_chunk(mx, d, *joints)
+        traj.append(np.asarray(q))
+    return np.concatenate(traj), d
 
 
 @pytest.fixture(scope="module")
@@ -49,9 +63,8 @@ def flat_model():
 def test_compiles_in_mujoco_and_mjx(flat_model):
     m = flat_model
     assert m.nq == 19 and m.nv == 18 and m.nu == 12
-    mx = mjx.put_model(m)
-    d = jax.jit(mjx.step)(mx, mjx.make_data(mx).replace(qpos=jnp.asarray(rb.standing_qpos((4, 4)))))
-    assert np.all(np.isfinite(np.asarray(d.qpos)))
+    traj, d = _hold_pose(m, rb.standing_qpos((4, 4)), HOLD_CHUNK)  # the program others reuse
+    assert np.all(np.isfinite(traj)) and np.all(np.isfinite(np.asarray(d.qvel)))
     assert m.opt.timestep == pytest.approx(0.005)
 
 

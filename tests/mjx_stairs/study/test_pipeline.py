@@ -1,6 +1,7 @@
 """End to end on the CPU: the real stair env trained for two iterations through the CLI, then
 evaluation, the EXP1 report, the transfer matrix and the bench on what it produced."""
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -99,13 +100,23 @@ def test_transfer_matrix_and_transferability(trained, tmp_path):
     assert t["u"]["s"] == pytest.approx(0.9 / 0.95) and t["s"]["u"] == pytest.approx(0.02 / 0.8)
     assert math.isnan(transfer.transferability({"a": {"a": 0.0}})["a"]["a"])
     path = str(trained / "stage1" / "policy.npz")
-    spec = evaluate.EvalSpec(levels=(2,), robots_per_level=2, episode_length_s=1.0, resolution=0.05,
-                             env_overrides=("robot.terrain_contacts=nearest",))
-    result = transfer.matrix({"straight": path}, spec, tmp_path)
-    assert result["levels"] == [3]
-    assert result["env_overrides"] == ["robot.terrain_contacts=nearest"]
+    policy = load_policy(path)
+    # the overrides reach the evaluation env: another collider, other contact rows
+    nearest = dataclasses.replace(TINY, env_overrides=("robot.terrain_contacts=nearest",))
+    env, _ = evaluate.make_eval_env(policy, nearest)
+    assert env.config.robot.terrain_contacts == "nearest" and env.num_contacts == 32
+    # the matrix passes them to every evaluation and records them. An override that restates
+    # the evaluation physics' collider keeps the program of test_eval_and_exp1_report (TINY on
+    # u_shaped), which the session's compilation cache then serves without compiling it again
+    spec = dataclasses.replace(TINY, env_overrides=("robot.terrain_contacts=columns",))
+    assert evaluate.env_config_of(policy, evaluate.physics_overrides(spec)) == (
+        evaluate.env_config_of(policy, evaluate.physics_overrides(TINY)))
+    result = transfer.matrix({"u_shaped": path}, spec, tmp_path)
+    assert result["levels"] == [1, 6]
+    assert result["env_overrides"] == ["robot.terrain_contacts=columns"]
+    assert result["success"]["u_shaped"]["u_shaped"]["env_overrides"] == list(spec.env_overrides)
     md = (tmp_path / "transfer.md").read_text()
-    assert "Transferability" in md and "evaluated with robot.terrain_contacts=nearest" in md
+    assert "Transferability" in md and "evaluated with robot.terrain_contacts=columns" in md
     with pytest.raises(Exception, match="unknown stair family"):
         bad = tmp_path / "bad.toml"
         bad.write_text('[models]\nzigzag = "x.npz"\n')
