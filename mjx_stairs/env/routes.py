@@ -51,14 +51,12 @@ def coarse(route: jnp.ndarray, cum: jnp.ndarray, n: jnp.ndarray) -> jnp.ndarray:
 
 def cut_corners(route: jnp.ndarray, span: jnp.ndarray, amount: jnp.ndarray) -> jnp.ndarray:
     """[K, 3] every point moved ``amount`` (0..1) of the way to the midpoint of the points
-    ``span`` m before and after it along the route (a corner is cut on its inside); the
-    route's ends stay."""
+    ``span`` m before and after it along the route (less near the ends, which stay): a corner
+    is cut on its inside, a straight stretch stays."""
     cum = arc_lengths(route)
-    total = cum[-1]
-    before = point_at(route, cum, jnp.clip(cum - span, 0.0, total))
-    after = point_at(route, cum, jnp.clip(cum + span, 0.0, total))
-    w = amount * jnp.clip(jnp.minimum(cum, total - cum) / jnp.maximum(span, 1e-6), 0.0, 1.0)
-    return route + w[:, None] * (0.5 * (before + after) - route)
+    reach = jnp.minimum(span, jnp.minimum(cum, cum[-1] - cum))
+    middle = 0.5 * (point_at(route, cum, cum - reach) + point_at(route, cum, cum + reach))
+    return route + amount * (middle - route)
 
 
 def shift_sideways(route: jnp.ndarray, offset: jnp.ndarray) -> jnp.ndarray:

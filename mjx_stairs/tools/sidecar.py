@@ -102,9 +102,10 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
     """What the policy was trained to withstand (issue 24), for a runner to compare its robot
     with; none of it changes what the runner computes."""
     r, n, route = cfg.randomization, cfg.noise, cfg.route
+    damping = rb.JOINT_DAMPING if cfg.robot.joint_damping is None else cfg.robot.joint_damping
     return {
         "joint_damping_nms_rad": list(r.joint_damping) if r.enabled and r.joint_damping
-        else None,
+        else [damping, damping],
         "action_delay_s": list(r.action_delay_s) if r.enabled else [0.0, 0.0],
         "pushes": None if not (r.enabled and r.push_interval_s > 0) else {
             "interval_s": r.push_interval_s, "velocity_m_s": r.push_velocity,
