@@ -68,6 +68,8 @@ class StairEnv(Env):
         self.resolution = float(atlas.resolution)
         self.num_levels = int(atlas.rows)
         self.families = tuple(atlas.families)
+        directions = set(np.asarray(atlas.direction).tolist())
+        self.both_ways = len(directions) == 2  # the atlas is walked up and down: DOWN_METRICS
         self.robot = rb.build(atlas.heights, self.resolution, config.robot)
         self._mx = self.robot.mjx_model
         if self._mx.na:
@@ -222,11 +224,13 @@ class StairEnv(Env):
         k_noise, k_reset, info["rng"] = jax.random.split(info["rng"], 3)
         with jax.named_scope("observe"):  # a reset's observation counts as auto_reset
             final_obs = self.observe(data.qpos, data.qvel, info, k_noise, arc=arc, kin=kin)
-        level = info["level"]
+        level, tile = info["level"], info["tile"]
         moved_up = cur.reached(q.planar_goal_distance, q.yaw_error, c.curriculum)
         data, obs, info = self._auto_reset(data, info, final_obs, ends, moved_up, k_reset)
         metrics = endings.metrics(terms, ends, finite, level, self.num_levels - 1,
                                   q.planar_goal_distance, moved_up)
+        if self.both_ways:
+            metrics.update(endings.down_metrics(ends, self.tiles.down[tile]))
         f32 = lambda x: x.astype(jnp.float32)  # noqa: E731  (also when the physics is float64)
         return State(data, obs, f32(reward), f32(ends.done), jax.tree.map(f32, metrics), info)
 
@@ -306,7 +310,7 @@ class StairEnv(Env):
 
     def metric_names(self) -> tuple[str, ...]:
         """The keys of `state.metrics` (env.endings.metric_names)."""
-        return endings.metric_names(self._terms)
+        return endings.metric_names(self._terms, self.both_ways)
 
     # ------------------------------------------------------------------ observation
 

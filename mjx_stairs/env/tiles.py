@@ -18,7 +18,7 @@ class TileTables:
     line_len [n] total length; origin [n, 2] (host) the tiles' lower-left corners; lo / hi
     [n, 2] the world xy of each tile's first and last grid point (what the height map reads);
     floor / top [n] the lower and higher of the tile's start and goal floor heights; width [n]
-    the stair's clear width (0 where the atlas does not know it).
+    the stair's clear width (0 where the atlas does not know it); down [n] walked down.
     """
 
     def __init__(self, atlas: Any):
@@ -40,6 +40,7 @@ class TileTables:
         self.hi = jnp.asarray(self.origin + np.float32(extent))
         self.level = jnp.asarray(atlas.level, jnp.int32)
         self.family = jnp.asarray(atlas.family, jnp.int32)
+        self.down = jnp.asarray(np.asarray(atlas.direction) == 1)
         ends = np.stack([atlas.floor_height, atlas.goal_height]).astype(np.float32)
         self.floor, self.top = jnp.asarray(ends.min(0)), jnp.asarray(ends.max(0))
         width = getattr(atlas, "width", None)

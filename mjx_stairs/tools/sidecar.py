@@ -7,8 +7,8 @@ training noise), normalizer, height_map (grid, frame, offset, clip, sampling), j
 the Go2 SDK's motor order and the mapping), action, pd, rates, goal (final goal or waypoint on a
 route, and how the waypoint is computed), base_velocity, evaluation (the success and fall rules
 and the episode starts), training (what the policy was trained to withstand: joint damping,
-action delay, pushes, height-map offsets and holes, perturbed routes), versions, policy. The robot side reads it with
-mjx_stairs.tools.contract, which imports nothing of the training code.
+action delay, pushes, height-map offsets and holes, perturbed routes), versions, policy. The
+robot side reads it with mjx_stairs.tools.contract, which imports nothing of the training code.
 """
 
 from __future__ import annotations

@@ -65,6 +65,15 @@ def test_the_robots_step_finite_up_to_the_description_damping(rollout):
         assert float(state.metrics["nan_reset"].sum()) == 0
 
 
+def test_an_atlas_walked_both_ways_reports_the_way_down(env, rollout):
+    assert env.both_ways and "episode_success_down" in env.metric_names()
+    ended = np.stack([np.asarray(s.metrics["done"]) for s in rollout[1]])
+    down = np.stack([np.asarray(s.metrics["done_down"]) for s in rollout[1]])
+    was_down = np.stack([np.asarray(env.tiles.down)[np.asarray(s.info["tile"])]
+                         for s in [rollout[0]] + rollout[1][:-1]])  # the tile the step walked
+    np.testing.assert_array_equal(down, ended * was_down)
+
+
 def test_the_actor_map_has_holes_the_critic_map_has_none(rollout):
     actor = np.stack([np.asarray(s.obs["state"])[:, observation.N_VEC:] for s in rollout[1]])
     critic = np.stack([np.asarray(s.obs["privileged_state"])[:, observation.N_VEC:]

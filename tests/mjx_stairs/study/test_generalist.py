@@ -119,7 +119,7 @@ def trained(tmp_path_factory):
 def test_the_generalist_trains_a_few_iterations(trained):
     rows = [json.loads(x) for x in (trained / "metrics.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == [1, 2] and rows[-1]["env_steps"] == 2 * 8 * 8
-    for key in ("episode/return", "loss/value", "level", "reward/centreline"):
+    for key in ("episode/return", "loss/value", "level", "reward/centreline", "success_down"):
         assert math.isfinite(rows[-1][key]), key
     saved = load_policy(trained / "policy.npz").metadata["config"]
     assert saved["terrain"]["directions"] == ["up", "down"]
