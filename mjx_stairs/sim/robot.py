@@ -182,9 +182,7 @@ def build_mj_model(
                     hfield_name=contact.COLUMNS_HFIELD if columns else "terrain")
     for name in SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
-    if config.joint_damping is not None:
-        for name in JOINT_NAMES:
-            spec.joint(name).damping = [config.joint_damping, 0.0, 0.0]
+    set_joint_damping(spec, config)
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0
@@ -202,6 +200,13 @@ def build_mj_model(
             f"{config.terrain_contacts!r}"
         )
     return spec.compile()
+
+
+def set_joint_damping(spec: mujoco.MjSpec, config: RobotConfig) -> None:
+    """Every leg joint's passive damping to `config.joint_damping` (None: leave the MJCF's)."""
+    if config.joint_damping is not None:
+        for name in JOINT_NAMES:
+            spec.joint(name).damping = [config.joint_damping, 0.0, 0.0]
 
 
 def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,

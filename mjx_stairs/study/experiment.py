@@ -47,12 +47,15 @@ class TerrainConfig:
     border: float = field(default=2.0, metadata={"help": "flat border around the atlas (m)"})
 
     def __post_init__(self):
-        d, counts = self.directions, {**self.variants, "": self.variants_per_family}
+        d = self.directions
         if not d or len(set(d)) != len(d):
             raise ConfigError(f"config key 'terrain.directions': expected 'up', 'down' or both, "
                               f"each once, got {list(d)}")
+        if self.variants_per_family < 1:
+            raise ConfigError("config key 'terrain.variants_per_family': must be >= 1, got "
+                              f"{self.variants_per_family}")
         unknown = sorted(set(self.variants) - set(self.families))
-        if unknown or min(counts.values()) < 1:
+        if unknown or min(self.variants.values(), default=1) < 1:
             raise ConfigError(f"config key 'terrain.variants': families of terrain.families "
                               f"with >= 1 column each, got {dict(self.variants)}")
 

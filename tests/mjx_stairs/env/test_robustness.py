@@ -16,6 +16,7 @@ from mjx_stairs.env import randomization as dr
 from mjx_stairs.env.config import env_config_from
 from mjx_stairs.env.geometry import quat_to_mat
 from mjx_stairs.env.stair_env import StairEnv
+from mjx_stairs.sim import box_world
 from mjx_stairs.sim import robot as rb
 from mjx_stairs.tools import contract
 
@@ -164,7 +165,10 @@ def test_pushes_come_only_over_the_flights(env):
     np.testing.assert_array_equal(np.asarray(calm), 0.0)
 
 
-def test_robot_joint_damping_builds_into_the_model():
+def test_robot_joint_damping_builds_into_the_model_and_the_ground_truth():
     assert rb.build_mj_model(None, 0.5).dof_damping[6:].tolist() == [rb.JOINT_DAMPING] * 12
-    damped = rb.build_mj_model(None, 0.5, rb.RobotConfig(joint_damping=2.0)).dof_damping
+    two = rb.RobotConfig(joint_damping=2.0)
+    damped = rb.build_mj_model(None, 0.5, two).dof_damping
     assert damped[6:].tolist() == [2.0] * 12 and damped[:6].tolist() == [0.0] * 6
+    boxes = box_world.build_model(np.zeros((0, 6)), two).dof_damping
+    assert boxes.tolist() == damped.tolist()
