@@ -13,7 +13,7 @@ comma := ,
 EXTRAS := dev$(if $(HAS_GPU),$(comma)cuda)
 ARGS ?=
 
-.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast ablation eval exp1 transfer-matrix bench clean-venv
+.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-generalist ablation eval exp1 transfer-matrix bench clean-venv
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -37,6 +37,9 @@ train-stage2: $(SETUP)
 
 train-stage2-fast: $(SETUP)  # lean settings (issue 7): 417 k vs 187 k env steps/s on an H100 (stage-2 success: experiments/README.md)
 	$(PY) -m mjx_stairs train experiments/stage2_u_lean.toml $(ARGS)
+
+train-generalist: $(SETUP)  # issue 24: building stairs up and down, robust to a real Go2 (from stage 1)
+	$(PY) -m mjx_stairs train experiments/generalist.toml $(ARGS)
 
 ablation: $(SETUP)
 	$(PY) -m mjx_stairs train experiments/stage2_u_no_stall.toml $(ARGS)

@@ -29,7 +29,8 @@ from .tile import (
 )
 
 _TABLES = ("origin", "spawn", "goal", "centreline", "level", "family", "variant",
-           "floor_height", "goal_height", "direction")
+           "floor_height", "goal_height", "direction", "width")
+_LATER = {"direction": np.int32, "width": np.float32}  # tables that older files may lack
 ATLAS_DIRECTIONS = ("up", "down", "both")
 
 
@@ -48,6 +49,7 @@ class Atlas:
     level [n] int32 (0-based); family [n] int32; variant [n] int32 (index into the family's
     variants); floor_height [n] float32; goal_height [n] float32.
     direction [n] int32: 0 = up (spawn at the foot), 1 = down (spawn on the top landing).
+    width [n] float32: the stair's clear width (m; the tile spec's "width", 0 where it has none).
     variant_names: per family, the names its variant ids refer to.
     """
 
@@ -68,12 +70,14 @@ class Atlas:
     floor_height: np.ndarray
     goal_height: np.ndarray
     direction: np.ndarray = None  # type: ignore[assignment]
+    width: np.ndarray = None  # type: ignore[assignment]
     schedule: str = "train"
     variant_names: tuple[tuple[str, ...], ...] = ()
 
     def __post_init__(self):
-        if self.direction is None:
-            self.direction = np.zeros(len(self.level), np.int32)
+        for key, dtype in _LATER.items():
+            if getattr(self, key) is None:
+                setattr(self, key, np.zeros(len(self.level), dtype))
 
     @property
     def num_tiles(self) -> int:
@@ -103,9 +107,11 @@ class Atlas:
     def load(cls, path: str | os.PathLike) -> Atlas:
         """Read an atlas written by save(); missing file -> FileNotFoundError, anything
         unreadable -> one-line ValueError naming the file."""
-        data = load_npz(path, "atlas", ("heights", "meta") + _TABLES[:-1])
-        if "direction" not in data:   # atlases saved before directions existed: all "up"
-            data["direction"] = np.zeros(len(data["level"]), np.int32)
+        data = load_npz(path, "atlas", ("heights", "meta")
+                        + tuple(k for k in _TABLES if k not in _LATER))
+        for key, dtype in _LATER.items():   # saved before the table existed: "up", width 0
+            if key not in data:
+                data[key] = np.zeros(len(data["level"]), dtype)
         try:
             m = json.loads(str(data["meta"]))
             atlas = cls(heights=data["heights"], resolution=float(m["resolution"]),
@@ -248,6 +254,47 @@ def _dtype(key: str):
     return np.int32 if key in ("level", "family", "variant", "direction") else np.float32
 
 
+def join_columns(atlases: Sequence[Atlas]) -> Atlas:
+    """Atlases of the same rows, grid, tile size, border and schedule side by side (the first's
+    columns, then the second's, ...), as one atlas: for families with different numbers of
+    columns (build_atlas gives every family the same). Each family may appear in one only."""
+    a0 = atlases[0]
+    families = tuple(f for a in atlases for f in a.families)
+    if len(set(families)) != len(families):
+        raise ValueError(f"join_columns: a family appears in two atlases: {families}")
+    for a in atlases:
+        if (a.rows, a.resolution, a.tile_size, a.border, a.schedule) != (
+                a0.rows, a0.resolution, a0.tile_size, a0.border, a0.schedule):
+            raise ValueError("join_columns: the atlases differ in rows, resolution, tile size, "
+                             f"border or schedule ({a.families} against {a0.families})")
+    n, b = a0.tile_points, int(round(a0.border / a0.resolution))
+    cols = sum(a.cols for a in atlases)
+    heights = np.zeros((2 * b + a0.rows * n + 1, 2 * b + cols * n + 1), np.float32)
+    parts, col0, fam0 = [], 0, 0
+    for a in atlases:
+        heights[b:b + a.rows * n, b + col0 * n:b + (col0 + a.cols) * n] = \
+            a.heights[b:b + a.rows * n, b:b + a.cols * n]
+        parts.append(_shifted_tables(a, col0 * a0.tile_size, fam0))
+        col0, fam0 = col0 + a.cols, fam0 + len(a.families)
+    tabs = {k: np.concatenate([p[k].reshape(a0.rows, a.cols, *p[k].shape[1:])
+                               for p, a in zip(parts, atlases, strict=True)], axis=1)
+            .reshape(a0.rows * cols, *parts[0][k].shape[1:]) for k in _TABLES}
+    return Atlas(heights=heights, resolution=a0.resolution, tile_size=a0.tile_size,
+                 border=a0.border, rows=a0.rows, cols=cols, families=families,
+                 schedule=a0.schedule,
+                 variant_names=tuple(v for a in atlases for v in a.variant_names), **tabs)
+
+
+def _shifted_tables(a: Atlas, dx: float, fam0: int) -> dict[str, np.ndarray]:
+    """``a``'s tables moved ``dx`` m along x, family indices counted from ``fam0``."""
+    out = {k: np.array(getattr(a, k)) for k in _TABLES}
+    for k in ("origin", "spawn", "goal"):
+        out[k][:, 0] += np.float32(dx)
+    out["centreline"][..., 0] += np.float32(dx)
+    out["family"] += fam0
+    return out
+
+
 def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> None:
     """Add ``tile``'s tables, shifted by ``origin`` [2] to the world frame."""
     spawn, goal, line = tile.spawn.copy(), tile.goal.copy(), tile.centreline.copy()
@@ -265,6 +312,8 @@ def _append(tabs: dict, tile: Tile, origin: np.ndarray, fi: int, vi: int) -> Non
     tabs["floor_height"].append(tile.floor_height)
     tabs["goal_height"].append(tile.goal_height)
     tabs["direction"].append(0 if tile.direction == "up" else 1)
+    tabs["width"].append(float(tile.spec.get("width", 0.0) or 0.0))
 
 
-__all__ = ["Atlas", "build_atlas", "build_cell_atlas", "build_tile_atlas", "FAMILIES"]
+__all__ = ["Atlas", "build_atlas", "build_cell_atlas", "build_tile_atlas", "join_columns",
+           "FAMILIES"]

@@ -5,10 +5,17 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Literal, Sequence
 
-from mjx_stairs.config import apply_overrides, from_dict, to_dict
+from mjx_stairs.config import ConfigError, apply_overrides, from_dict, to_dict
 from mjx_stairs.env import curriculum as cur
 from mjx_stairs.env import rewards as rw
 from mjx_stairs.sim import robot as rb
+
+
+def _require(prefix: str, checks: list[tuple[str, Any, bool, str]]) -> None:
+    """ConfigError naming the first of ``checks`` (name, value, ok, what it must be) not ok."""
+    for name, value, ok, need in checks:
+        if not ok:
+            raise ConfigError(f"config key '{prefix}.{name}': must be {need}, got {value}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -22,6 +29,18 @@ class NoiseConfig:
     joint_pos: float = 0.01
     joint_vel: float = 1.5
     height: float = 0.1
+    # The height map as an elevation map gets it wrong (issue 24; all 0: off). A missing cell
+    # reads +clip, what a robot-side runner writes for a cell without data (tools/contract.py).
+    height_offset: float = 0.0  # m, uniform +- per robot and episode, added to every cell
+    height_missing: float = 0.0  # chance per step that any one cell is missing
+    height_missing_body: float = 0.0  # the same for the cells under the trunk (occluded)
+    height_missing_edge: float = 0.0  # the same for the cells beside a step edge
+
+    def __post_init__(self):
+        _require("env.noise", [
+            (k, getattr(self, k), 0.0 <= getattr(self, k) <= 1.0, "in [0, 1]")
+            for k in ("height_missing", "height_missing_body", "height_missing_edge")]
+            + [("height_offset", self.height_offset, self.height_offset >= 0.0, ">= 0")])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,6 +66,43 @@ class RandomizationConfig:
     kd_scale: tuple[float, float] = (0.9, 1.1)
     push_interval_s: float = 8.0  # a push every this many seconds (0: never)
     push_velocity: float = 0.5  # m/s, uniform +- added to the base xy velocity
+    # What a real Go2 needs (issue 24; the defaults leave the env as it was):
+    # pushes only while the base is over the flights (between the tile's floor and top
+    # heights), at random steps, one per push_interval_s on average
+    push_on_stairs: bool = False
+    # N m s/rad, uniform per robot, the joints' passive damping (the MJCF's 0.1 when ()); the
+    # Go2 description has 2
+    joint_damping: tuple[float, ...] = ()
+    # s, uniform per robot in whole physics steps: a new PD target takes effect this much
+    # later (the previous one holds until then); at most one policy step
+    action_delay_s: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self):
+        d, lag = self.joint_damping, self.action_delay_s
+        _require("env.randomization", [
+            ("joint_damping", list(d), not d or (len(d) == 2 and 0.0 <= d[0] <= d[1]),
+             "() or [lo, hi] with 0 <= lo <= hi"),
+            ("action_delay_s", list(lag), 0.0 <= lag[0] <= lag[1], "[lo, hi], 0 <= lo <= hi")])
+
+
+@dataclasses.dataclass(frozen=True)
+class RouteConfig:
+    """The route the waypoint follows, perturbed per episode (goal_mode "waypoint" only), as a
+    building map's route would be off: resampled to a coarse polyline, its corners cut, shifted
+    sideways. Rewards, success and the curriculum keep the true centre-line and goal."""
+
+    perturb_prob: float = 0.0  # chance that an episode's route is perturbed (0: off)
+    lateral: float = 0.33  # largest sideways shift, a fraction of the stair's clear width
+    corner_cut_m: float = 1.0  # largest half-span of the corner cutting (m)
+    coarse_points: tuple[int, int] = (3, 8)  # the route resampled to this many points
+
+    def __post_init__(self):
+        lo, hi = self.coarse_points
+        _require("env.route", [
+            ("perturb_prob", self.perturb_prob, 0.0 <= self.perturb_prob <= 1.0, "in [0, 1]"),
+            ("lateral", self.lateral, 0.0 <= self.lateral <= 0.5, "in [0, 0.5]"),
+            ("corner_cut_m", self.corner_cut_m, self.corner_cut_m >= 0.0, ">= 0"),
+            ("coarse_points", [lo, hi], 2 <= lo <= hi, "[lo, hi] with 2 <= lo <= hi")])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,6 +115,7 @@ class EnvConfig:
     noise: NoiseConfig = NoiseConfig()
     height_map: HeightMapConfig = HeightMapConfig()
     randomization: RandomizationConfig = RandomizationConfig()
+    route: RouteConfig = RouteConfig()
     decimation: int = 4  # physics steps per policy step (0.005 s x 4 -> 50 Hz)
     episode_length_s: float = 10.0
     action_clip: float = 5.0  # |action| clip before scaling
@@ -82,6 +139,15 @@ class EnvConfig:
     goal_mode: Literal["final", "waypoint"] = "final"
     waypoint_lookahead_m: float = 1.0
 
+    def __post_init__(self):
+        lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
+        _require("env", [
+            ("randomization.action_delay_s", lag, lag <= step + 1e-9,
+             f"at most one policy step ({step:g} s)"),
+            ("route.perturb_prob", self.route.perturb_prob,
+             self.route.perturb_prob == 0 or self.goal_mode == "waypoint",
+             "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)")])
+
 
 def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) -> EnvConfig:
     """The same env for evaluation: no noise, no randomisation, no trunk ending, no curriculum."""
@@ -89,6 +155,7 @@ def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) 
         config,
         noise=dataclasses.replace(config.noise, enabled=False),
         randomization=dataclasses.replace(config.randomization, enabled=False),
+        route=dataclasses.replace(config.route, perturb_prob=0.0),
         curriculum=dataclasses.replace(config.curriculum, enabled=False),
         terminate_on_trunk_contact=False,
         joint_noise_at_reset=0.0,

@@ -1,5 +1,9 @@
 """The terrain curriculum as device arrays: every robot keeps its own family, level and tile.
 
+A robot's family is drawn once, at its first reset (uniformly, or by `family_weights`), and kept;
+its tile is a random column of its family at its level, so an atlas built with both directions
+(terrains.build_atlas(direction="both")) walks every level up and down under one level.
+
 The rule (paper; thresholds from the authors' code): when a robot's episode ends it moves up one
 level if it ended within `up_distance` of the goal (planar) and within `up_yaw` of the goal's
 heading, otherwise down one level. A robot that clears the top level is sent to a random level.
@@ -14,6 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_stairs.config import ConfigError
+
 
 @dataclasses.dataclass(frozen=True)
 class CurriculumConfig:
@@ -24,6 +30,14 @@ class CurriculumConfig:
     up_yaw: float = 0.4  # heading error (rad) under which a robot moves up
     initial_max_level: int = 1  # robots start uniformly in levels [0, initial_max_level]
     random_on_top: bool = True  # a robot that clears the top level goes to a random level
+    # how often each family of the atlas is drawn, in its order (() = uniformly)
+    family_weights: tuple[float, ...] = ()
+
+    def __post_init__(self):
+        w = self.family_weights
+        if w and (min(w) < 0 or sum(w) <= 0):
+            raise ConfigError("config key 'env.curriculum.family_weights': must be >= 0 with a "
+                              f"positive sum, got {list(w)}")
 
 
 class TileTable:
@@ -48,6 +62,17 @@ class TileTable:
         self.columns = jnp.asarray(table)
         self.num_columns = jnp.asarray(counts)
         self.cols = cols
+
+
+def pick_family(rng: jax.Array, num_families: int, config: CurriculumConfig) -> jnp.ndarray:
+    """[] int32 family index of a new robot, uniform or by `config.family_weights`."""
+    if not config.family_weights:
+        return jax.random.randint(rng, (), 0, num_families)
+    if len(config.family_weights) != num_families:
+        raise ConfigError(f"config key 'env.curriculum.family_weights': {num_families} weights "
+                          f"needed (one per atlas family), got {len(config.family_weights)}")
+    p = jnp.asarray(config.family_weights, jnp.float32)
+    return jax.random.choice(rng, num_families, p=p / p.sum()).astype(jnp.int32)
 
 
 def next_level(

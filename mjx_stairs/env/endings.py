@@ -16,6 +16,10 @@ STEP_METRICS = ("done", "episode_success", "terminated", "truncated", "nan_reset
                 "outside_termination", "level", "at_top", "goal_distance", "moved_up")
 """The metrics of every step besides `reward/<term>` (means over robots in the trainer's log)."""
 
+DOWN_METRICS = ("done_down", "episode_success_down")
+"""More metrics on an atlas walked both ways: episodes that ended walking down, and their
+successes (the trainer logs success_down from them)."""
+
 
 class Endings(NamedTuple):
     """How the step ended the episode ([] each); `done` = terminated | truncated."""
@@ -53,9 +57,17 @@ def endings(c: EnvConfig, kin: Kinematics, q: rw.Quantities, info: dict, finite:
                    terminated, truncated, terminated | truncated)
 
 
-def metric_names(reward_terms: tuple[str, ...]) -> tuple[str, ...]:
-    """The keys of `state.metrics`: `reward/<term>` per active term, then STEP_METRICS."""
-    return tuple(f"reward/{k}" for k in reward_terms) + STEP_METRICS
+def metric_names(reward_terms: tuple[str, ...], both_ways: bool = False) -> tuple[str, ...]:
+    """The keys of `state.metrics`: `reward/<term>` per active term, then STEP_METRICS (then
+    DOWN_METRICS on an atlas walked both ways)."""
+    return (tuple(f"reward/{k}" for k in reward_terms) + STEP_METRICS
+            + (DOWN_METRICS if both_ways else ()))
+
+
+def down_metrics(e: Endings, down: jnp.ndarray) -> dict[str, jnp.ndarray]:
+    """{DOWN_METRICS: []} of this step for a robot whose episode walks down (`down`)."""
+    ended = (e.done & down).astype(jnp.float32)
+    return dict(zip(DOWN_METRICS, (ended, e.success * ended), strict=True))
 
 
 def metrics(terms: dict, e: Endings, finite: jnp.ndarray, level: jnp.ndarray, top_level: int,

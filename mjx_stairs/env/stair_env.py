@@ -5,10 +5,10 @@ env auto-resets inside `step`, because the curriculum picks the next tile when a
 the returned state already holds the new episode, `state.info["final_obs"]` the observation
 before the reset and `state.info["truncation"]` whether the episode ended by timeout.
 
-`step` runs its phases in order: actuate (PD over `decimation` physics steps, with the NaN
-guard) -> quantities (base kinematics once, goal, centre-line, contacts) -> rewards (named terms,
-env.rewards) -> endings (success, falls, timeout) -> observation -> auto-reset (curriculum) ->
-metrics. The observation layout is env.observation's table.
+`step` runs its phases in order: actuate (env.actuation: PD over `decimation` physics steps,
+with the NaN guard) -> quantities (base kinematics once, goal, centre-line, contacts) -> rewards
+(named terms, env.rewards) -> endings (success, falls, timeout) -> observation -> auto-reset
+(curriculum) -> metrics. The observation layout is env.observation's table.
 
 Where ours differs from the authors' Isaac Lab setup:
 - The height map is sampled bilinearly from the atlas heightfield on the device instead of ray
@@ -31,9 +31,10 @@ from brax.envs.base import Env, State
 from mujoco import mjx
 
 from mjx_stairs.env import curriculum as cur
-from mjx_stairs.env import endings, observation
+from mjx_stairs.env import endings, observation, perception, routes
 from mjx_stairs.env import randomization as dr
 from mjx_stairs.env import rewards as rw
+from mjx_stairs.env.actuation import STEP_INPUTS, Actuator
 from mjx_stairs.env.config import EnvConfig
 from mjx_stairs.env.geometry import (
     Kinematics,
@@ -42,13 +43,10 @@ from mjx_stairs.env.geometry import (
     yaw_quat,
 )
 from mjx_stairs.env.terrain import Terrain
-from mjx_stairs.env.tiles import TileTables
+from mjx_stairs.env.tiles import TileTables, waypoint_on
 from mjx_stairs.sim import robot as rb
 
-STEP_INPUTS = ("qpos", "qvel", "qacc_warmstart", "ctrl", "time")
-"""The fields of mjx.Data a physics step starts from: MJX recomputes every other field
-(kinematics, contacts, constraint rows) from these (the Go2 model has no actuator activations).
-The NaN guard restores these, and `pack_state` keeps these."""
+__all__ = ["STEP_INPUTS", "StairEnv"]
 
 class StairEnv(Env):
     """Go2 climbing the stairs of an atlas. See the module docstring for the step."""
@@ -70,6 +68,8 @@ class StairEnv(Env):
         self.resolution = float(atlas.resolution)
         self.num_levels = int(atlas.rows)
         self.families = tuple(atlas.families)
+        directions = set(np.asarray(atlas.direction).tolist())
+        self.both_ways = len(directions) == 2  # the atlas is walked up and down: DOWN_METRICS
         self.robot = rb.build(atlas.heights, self.resolution, config.robot)
         self._mx = self.robot.mjx_model
         if self._mx.na:
@@ -83,18 +83,16 @@ class StairEnv(Env):
         self.tile_origin = self.tiles.origin  # [n, 2] host copy
         self._table = cur.TileTable(np.asarray(atlas.family), int(atlas.cols), len(self.families))
         self.contact_rows = rb.sphere_contact_rows(mj, ids)
+        self.actuate = Actuator(self._mx, ids, config, self.terrain, self.tiles)
 
         self._nominal = jnp.asarray(rb.NOMINAL_JOINT_POS)
         lo, hi = rb.JOINT_RANGE[:, 0], rb.JOINT_RANGE[:, 1]
         mid, r = 0.5 * (lo + hi), 0.5 * (hi - lo)
         self._soft_lower = jnp.asarray(mid - 0.95 * r)
         self._soft_upper = jnp.asarray(mid + 0.95 * r)
-        self._torque_limit = jnp.asarray(rb.TORQUE_LIMIT * config.robot.torque_scale)
         self._dt = config.robot.timestep * config.decimation
         self._episode_steps = int(round(config.episode_length_s / self._dt))
         self._hold_steps = max(1, int(round(config.success_hold_s / self._dt)))
-        push = config.randomization.push_interval_s
-        self._push_steps = int(round(push / self._dt)) if push > 0 else 0
         self._terms = rw.active_terms(config.rewards)
 
     # ------------------------------------------------------------------ properties
@@ -156,7 +154,7 @@ class StairEnv(Env):
         k_level, k_family, k_rest = jax.random.split(rng, 3)
         top = min(self.config.curriculum.initial_max_level, self.num_levels - 1)
         level = jax.random.randint(k_level, (), 0, top + 1)
-        family = jax.random.randint(k_family, (), 0, len(self.families))
+        family = cur.pick_family(k_family, len(self.families), self.config.curriculum)
         return self.reset_at(k_rest, level, family)
 
     def reset_at(self, rng: jax.Array, level: jnp.ndarray, family: jnp.ndarray) -> State:
@@ -202,7 +200,8 @@ class StairEnv(Env):
             ks[3], (12,), minval=-c.joint_noise_at_reset, maxval=c.joint_noise_at_reset
         )
         qpos = jnp.concatenate([jnp.array([x, y, sp[2] + c.spawn_height]), yaw_quat(yaw), joints])
-        return qpos, dr.draw(ks[4:], c)
+        draws = {**dr.draw(ks[4:], c), **perception.draw(rng, c)}
+        return qpos, {**draws, **routes.draw(rng, self.tiles, tile, c)}
 
     # ------------------------------------------------------------------ step
 
@@ -211,7 +210,7 @@ class StairEnv(Env):
         c = self.config
         info = dict(state.info)
         action = jnp.clip(action, -c.action_clip, c.action_clip)
-        data, finite = self._actuate(state.pipeline_state, action, info)
+        data, finite = self.actuate(state.pipeline_state, action, info)
         kin = base_kinematics(data.qpos, data.qvel)
         q, arc, foot = self._quantities(data, kin, action, info)
         with jax.named_scope("rewards"):
@@ -225,41 +224,15 @@ class StairEnv(Env):
         k_noise, k_reset, info["rng"] = jax.random.split(info["rng"], 3)
         with jax.named_scope("observe"):  # a reset's observation counts as auto_reset
             final_obs = self.observe(data.qpos, data.qvel, info, k_noise, arc=arc, kin=kin)
-        level = info["level"]
+        level, tile = info["level"], info["tile"]
         moved_up = cur.reached(q.planar_goal_distance, q.yaw_error, c.curriculum)
         data, obs, info = self._auto_reset(data, info, final_obs, ends, moved_up, k_reset)
         metrics = endings.metrics(terms, ends, finite, level, self.num_levels - 1,
                                   q.planar_goal_distance, moved_up)
+        if self.both_ways:
+            metrics.update(endings.down_metrics(ends, self.tiles.down[tile]))
         f32 = lambda x: x.astype(jnp.float32)  # noqa: E731  (also when the physics is float64)
         return State(data, obs, f32(reward), f32(ends.done), jax.tree.map(f32, metrics), info)
-
-    def _actuate(self, data0: mjx.Data, action: jnp.ndarray,
-                 info: dict) -> tuple[mjx.Data, jnp.ndarray]:
-        """PD control over `decimation` physics steps (after a push, if one is due); a robot
-        whose physics blew up gets the step's inputs back (the NaN guard). -> (data, finite)."""
-        c = self.config
-        model = dr.robot_model(self._mx, self._ids.base_body, info, c.randomization)
-        q_target = self._nominal + c.robot.action_scale * action
-        kp = c.robot.kp * info["kp_scale"]
-        kd = c.robot.kd * info["kd_scale"]
-        limit = self._torque_limit * info["motor_strength"]
-        qj, vj = self._ids.qpos_joints, self._ids.qvel_joints
-
-        def physics(data, _):
-            tau = rb.pd_torque(q_target, data.qpos[qj], data.qvel[vj], kp, kd, limit)
-            return mjx.step(model, data.replace(ctrl=tau)), None
-
-        if self._push_steps:
-            data0 = dr.push(data0, info, c.randomization, self._push_steps)
-        with jax.named_scope("physics"):  # scopes name the pieces in a profiler trace
-            data = jax.lax.scan(physics, data0, None, length=c.decimation)[0]
-        finite = jnp.all(jnp.isfinite(data.qpos)) & jnp.all(jnp.isfinite(data.qvel))
-        with jax.named_scope("nan_guard"):
-            # Only the fields a step starts from (STEP_INPUTS) go back to their values before
-            # the step; the derived ones, recomputed by the next step, stay as they came out.
-            data = data.replace(**{f: jnp.where(finite, getattr(data, f), getattr(data0, f))
-                                   for f in STEP_INPUTS})
-        return data, finite
 
     def _quantities(self, data: mjx.Data, kin: Kinematics, action: jnp.ndarray,
                     info: dict) -> tuple[rw.Quantities, jnp.ndarray, jnp.ndarray]:
@@ -337,16 +310,20 @@ class StairEnv(Env):
 
     def metric_names(self) -> tuple[str, ...]:
         """The keys of `state.metrics` (env.endings.metric_names)."""
-        return endings.metric_names(self._terms)
+        return endings.metric_names(self._terms, self.both_ways)
 
     # ------------------------------------------------------------------ observation
 
-    def goal_target(self, pos: jnp.ndarray, tile: jnp.ndarray,
-                    arc: jnp.ndarray | None = None) -> jnp.ndarray:
+    def goal_target(self, pos: jnp.ndarray, tile: jnp.ndarray, arc: jnp.ndarray | None = None,
+                    info: dict | None = None) -> jnp.ndarray:
         """The (x, y, z, yaw) the goal observation points at, per `config.goal_mode` (see
-        env.tiles.TileTables.waypoint)."""
+        env.tiles.TileTables.waypoint), on the episode's route when info has one (env.routes;
+        `arc` is along the tile's centre-line)."""
         if self.config.goal_mode == "final":
             return self.tiles.goal[tile]
+        if info is not None and "route" in info:
+            return waypoint_on(pos, info["route"], info["route_cum"], self.tiles.goal[tile],
+                               self.config.waypoint_lookahead_m)
         return self.tiles.waypoint(pos, tile, self.config.waypoint_lookahead_m, arc)
 
     def observe(self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict,
@@ -356,7 +333,7 @@ class StairEnv(Env):
         info's tile and last action; with `rng` None both are clean. `arc`: see goal_target;
         `kin`: base_kinematics(qpos, qvel) when the caller has it."""
         kin = base_kinematics(qpos, qvel) if kin is None else kin
-        goal = self.goal_target(kin.pos, info["tile"], arc)
+        goal = self.goal_target(kin.pos, info["tile"], arc, info)
         values = {
             "base_lin_vel": kin.lin_vel_body,
             "base_ang_vel": qvel[3:6],
@@ -368,7 +345,8 @@ class StairEnv(Env):
                                      wrap_angle(goal[3] - kin.yaw)[None]]),
             "height_map": self.height_map(kin.pos, kin.yaw, info["tile"]),
         }
-        return observation.assemble(values, self.config.height_map, self.config.noise, rng)
+        obs = observation.assemble(values, self.config.height_map, self.config.noise, rng)
+        return perception.corrupt(obs, info, rng, self.config)
 
     def pack_state(self, state: State) -> dict[str, Any]:
         """The part of a State that a resume needs (~2.4 kB per robot instead of ~53 kB).

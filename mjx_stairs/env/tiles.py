@@ -16,7 +16,9 @@ class TileTables:
     spawn [n, 7] (x, y, z, half x, half y, yaw, yaw half-range), goal [n, 4] (x, y, z, yaw),
     line3 [n, K, 3] / line [n, K, 2] the centre-lines, line_cum [n, K] arc length at each point,
     line_len [n] total length; origin [n, 2] (host) the tiles' lower-left corners; lo / hi
-    [n, 2] the world xy of each tile's first and last grid point (what the height map reads).
+    [n, 2] the world xy of each tile's first and last grid point (what the height map reads);
+    floor / top [n] the lower and higher of the tile's start and goal floor heights; width [n]
+    the stair's clear width (0 where the atlas does not know it); down [n] walked down.
     """
 
     def __init__(self, atlas: Any):
@@ -38,6 +40,11 @@ class TileTables:
         self.hi = jnp.asarray(self.origin + np.float32(extent))
         self.level = jnp.asarray(atlas.level, jnp.int32)
         self.family = jnp.asarray(atlas.family, jnp.int32)
+        self.down = jnp.asarray(np.asarray(atlas.direction) == 1)
+        ends = np.stack([atlas.floor_height, atlas.goal_height]).astype(np.float32)
+        self.floor, self.top = jnp.asarray(ends.min(0)), jnp.asarray(ends.max(0))
+        width = getattr(atlas, "width", None)
+        self.width = jnp.asarray(np.zeros(len(ends[0])) if width is None else width, jnp.float32)
 
     def centreline(self, tile: int) -> np.ndarray:
         """[K, 2] the tile's centre-line (x, y), on the host."""
@@ -48,16 +55,23 @@ class TileTables:
         """(x, y, z, yaw): the point `lookahead` m further along the tile's centre-line than
         pos's projection on it (arc length `arc`, when the caller has it), with the line's
         heading there; the tile's goal once that is nearer along the line than `lookahead`."""
-        goal = self.goal[tile]
-        line, cum, total = self.line3[tile], self.line_cum[tile], self.line_len[tile]
-        if arc is None:
-            _, arc = rw.centreline_geometry(pos[:2], self.line[tile], cum)
-        s = arc + lookahead
-        i = jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
-        seg = line[i + 1] - line[i]
-        seg_len = cum[i + 1] - cum[i]
-        t = jnp.clip((s - cum[i]) / jnp.maximum(seg_len, 1e-6), 0.0, 1.0)
-        point = line[i] + t * seg
-        yaw = jnp.arctan2(seg[1], seg[0])
-        waypoint = jnp.concatenate([point, yaw[None]])
-        return jnp.where(s >= total, goal, waypoint)
+        return waypoint_on(pos, self.line3[tile], self.line_cum[tile], self.goal[tile],
+                           lookahead, arc)
+
+
+def waypoint_on(pos: jnp.ndarray, line3: jnp.ndarray, cum: jnp.ndarray, goal: jnp.ndarray,
+                lookahead: float, arc: jnp.ndarray | None = None) -> jnp.ndarray:
+    """(x, y, z, yaw): the waypoint of TileTables.waypoint on any route, line3 [K, 3] with arc
+    lengths cum [K] (its length cum[-1]), ending at goal [4]."""
+    total = cum[-1]
+    if arc is None:
+        _, arc = rw.centreline_geometry(pos[:2], line3[:, :2], cum)
+    s = arc + lookahead
+    i = jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
+    seg = line3[i + 1] - line3[i]
+    seg_len = cum[i + 1] - cum[i]
+    t = jnp.clip((s - cum[i]) / jnp.maximum(seg_len, 1e-6), 0.0, 1.0)
+    point = line3[i] + t * seg
+    yaw = jnp.arctan2(seg[1], seg[0])
+    waypoint = jnp.concatenate([point, yaw[None]])
+    return jnp.where(s >= total, goal, waypoint)

@@ -213,10 +213,11 @@ def reduce_chunk_metrics(per_iter: dict[str, jax.Array]) -> dict[str, jax.Array]
     out["episode/length"] = jnp.sum(per_iter["_ep/length_sum"]) / jnp.maximum(count, 1.0)
     out["episode/terminations"] = jnp.sum(per_iter["episode/terminations"])
     out["episode/truncations"] = jnp.sum(per_iter["episode/truncations"])
-    if "episode_success" in per_iter and "done" in per_iter:
-        # success rate of the episodes that ended in this chunk (both are means over T x B)
-        ended = jnp.sum(per_iter["done"])
-        out["success"] = jnp.sum(per_iter["episode_success"]) / jnp.maximum(ended, 1e-9)
+    for k in per_iter:  # episode_success[_X] over done[_X]: success[_X]
+        if k.startswith("episode_success") and "done" + k[15:] in per_iter:
+            # success rate of the episodes that ended in this chunk (both are means over T x B)
+            ended = jnp.sum(per_iter["done" + k[15:]])
+            out["success" + k[15:]] = jnp.sum(per_iter[k]) / jnp.maximum(ended, 1e-9)
     return out
 
 

@@ -47,7 +47,8 @@ def build_model(
 
     Collision spheres are spheres whatever `config.terrain_contacts` says; mid-shin spheres
     collide when `config.shin_collision`. Gains are `config.kp` / `config.kd`, limits the
-    reference torque limits times `config.torque_scale`. `heightfield` = (heights, resolution)
+    reference torque limits times `config.torque_scale`, the joints' passive damping
+    `config.joint_damping` (None: the MJCF's). `heightfield` = (heights, resolution)
     stands the robot on that heightfield instead (MuJoCo's own heightfield collider, the
     terrain shape MJX sees: for telling the terrain's shape from MJX's solver and collider).
     """
@@ -74,6 +75,7 @@ def build_model(
         )
     for name in rb.SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
+    rb.set_joint_damping(spec, config)
     if not config.shin_collision:
         for name in rb.SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0

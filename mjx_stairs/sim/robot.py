@@ -51,6 +51,9 @@ TORQUE_LIMIT = np.array([23.7, 23.7, 45.43] * 4, np.float32)
 VELOCITY_LIMIT = 30.0
 """Joint velocity limit (rad/s), reference table."""
 
+JOINT_DAMPING = 0.1
+"""Passive damping of every leg joint in assets/go2.xml (N m s/rad); the Go2 description has 2."""
+
 NOMINAL_BASE_HEIGHT = 0.30
 """Approximate base height above flat ground in the nominal pose (m)."""
 
@@ -81,6 +84,14 @@ class RobotConfig:
     # geometry of the CPU MuJoCo ground truth, terrains.boxes).
     terrain_contacts: Literal["mjx", "nearest", "columns"] = "mjx"
     friction: float = 0.8  # foot-terrain sliding friction
+    # N m s/rad on every leg joint (None: the MJCF's JOINT_DAMPING); e.g. evaluating at the Go2
+    # description's 2: --env robot.joint_damping=2 (env.randomization.joint_damping draws it)
+    joint_damping: float | None = None
+
+    def __post_init__(self):
+        if self.joint_damping is not None and not self.joint_damping >= 0:
+            raise ConfigError("config key 'env.robot.joint_damping': must be >= 0 or none, got "
+                              f"{self.joint_damping}")
 
 
 PHYSICS = {
@@ -171,6 +182,7 @@ def build_mj_model(
                     hfield_name=contact.COLUMNS_HFIELD if columns else "terrain")
     for name in SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
+    set_joint_damping(spec, config)
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0
@@ -188,6 +200,13 @@ def build_mj_model(
             f"{config.terrain_contacts!r}"
         )
     return spec.compile()
+
+
+def set_joint_damping(spec: mujoco.MjSpec, config: RobotConfig) -> None:
+    """Every leg joint's passive damping to `config.joint_damping` (None: leave the MJCF's)."""
+    if config.joint_damping is not None:
+        for name in JOINT_NAMES:
+            spec.joint(name).damping = [config.joint_damping, 0.0, 0.0]
 
 
 def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,

@@ -36,9 +36,29 @@ class TerrainConfig:
         default="train", metadata={"help": "the level table: train | test | extended"})
     levels: tuple[int, ...] = field(default=(), metadata={"help": "0-based levels; () = all"})
     variants_per_family: int = field(default=4, metadata={"help": "atlas columns per family"})
+    variants: dict[str, int] = field(default_factory=dict, metadata={
+        "help": "atlas columns of the families named, instead of variants_per_family"})
+    directions: tuple[Literal["up", "down"], ...] = field(default=("up",), metadata={
+        "help": "up | down | both: every column is followed by the same tile walked down, so "
+                "a robot's level holds both directions"})
+    seed: int = field(default=0, metadata={"help": "which building staircases the tiles are"})
     resolution: float = field(default=0.025, metadata={"help": "grid spacing (m)"})
     tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
     border: float = field(default=2.0, metadata={"help": "flat border around the atlas (m)"})
+
+    def __post_init__(self):
+        d = self.directions
+        if not d or len(set(d)) != len(d):
+            raise ConfigError(f"config key 'terrain.directions': expected 'up', 'down' or both, "
+                              f"each once, got {list(d)}")
+        if self.variants_per_family < 1:
+            raise ConfigError("config key 'terrain.variants_per_family': must be >= 1, got "
+                              f"{self.variants_per_family}")
+        unknown = sorted(set(self.variants) - set(self.families))
+        if unknown or min(self.variants.values(), default=1) < 1:
+            raise ConfigError(f"config key 'terrain.variants': families of terrain.families "
+                              f"with >= 1 column each, got {dict(self.variants)}")
+
 
 
 @dataclass(frozen=True)
@@ -59,6 +79,12 @@ class ExperimentConfig:
     publish_dir: str = field(
         default="", metadata={"help": "copy policy, metrics, config and run facts here at the end"}
     )
+
+    def __post_init__(self):
+        weights, families = self.env.curriculum.family_weights, self.terrain.families
+        if weights and len(weights) != len(families):
+            raise ConfigError(f"config key 'env.curriculum.family_weights': one weight per "
+                              f"terrain.families entry ({len(families)}), got {len(weights)}")
 
 
 def load(path: str | Path | None, overrides: Iterable[str] = (), cpu: bool | None = None):
@@ -104,18 +130,24 @@ def _with_physics(data: dict[str, Any]) -> dict[str, Any]:
 
 
 def build_atlas(terrain: TerrainConfig):
-    """The atlas a TerrainConfig describes."""
+    """The atlas a TerrainConfig describes (one terrains.build_atlas, or one per family joined
+    side by side when `terrain.variants` gives families different numbers of columns)."""
     import terrains
 
-    return terrains.build_atlas(
-        terrain.families,
-        schedule=terrain.schedule,
-        levels=list(terrain.levels) or None,
-        variants_per_family=terrain.variants_per_family,
-        resolution=terrain.resolution,
-        tile_size=terrain.tile_size,
-        border=terrain.border,
-    )
+    counts = {f: terrain.variants.get(f, terrain.variants_per_family) for f in terrain.families}
+    kwargs = dict(schedule=terrain.schedule, levels=list(terrain.levels) or None,
+                  resolution=terrain.resolution, tile_size=terrain.tile_size,
+                  border=terrain.border)
+    if terrain.directions != ("up",):
+        both = len(terrain.directions) == 2
+        kwargs.update(direction="both" if both else terrain.directions[0])
+    if terrain.seed:
+        kwargs.update(seed=terrain.seed)
+    if len(set(counts.values())) == 1:
+        return terrains.build_atlas(terrain.families, variants_per_family=counts[
+            terrain.families[0]], **kwargs)
+    return terrains.join_columns([terrains.build_atlas([f], variants_per_family=n, **kwargs)
+                                  for f, n in counts.items()])
 
 
 def make_env(config: ExperimentConfig) -> StairEnv:

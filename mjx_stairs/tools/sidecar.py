@@ -6,8 +6,9 @@ Sections: onnx (input/output, sha256), observation (layout with units, scales, c
 training noise), normalizer, height_map (grid, frame, offset, clip, sampling), joints (our order,
 the Go2 SDK's motor order and the mapping), action, pd, rates, goal (final goal or waypoint on a
 route, and how the waypoint is computed), base_velocity, evaluation (the success and fall rules
-and the episode starts), versions, policy. The robot side reads it with
-mjx_stairs.tools.contract, which imports nothing of the training code.
+and the episode starts), training (what the policy was trained to withstand: joint damping,
+action delay, pushes, height-map offsets and holes, perturbed routes), versions, policy. The
+robot side reads it with mjx_stairs.tools.contract, which imports nothing of the training code.
 """
 
 from __future__ import annotations
@@ -91,6 +92,30 @@ def _height_map(cfg: EnvConfig) -> dict[str, Any]:
         "value": f"base_z - terrain_z - {hm.offset}, clipped to +-{hm.clip} m",
         "sampling": "terrain_z = the highest terrain surface at the point (a vertical ray cast "
                     "down from above everything; the robot itself is not terrain)",
+        "missing_value_m": hm.clip,
+        "missing": "a point without data (no terrain, or the elevation map has no cell there: "
+                   "terrain_z NaN) reads missing_value_m (+clip_m)",
+    }
+
+
+def _training(cfg: EnvConfig) -> dict[str, Any]:
+    """What the policy was trained to withstand (issue 24), for a runner to compare its robot
+    with; none of it changes what the runner computes."""
+    r, n, route = cfg.randomization, cfg.noise, cfg.route
+    damping = rb.JOINT_DAMPING if cfg.robot.joint_damping is None else cfg.robot.joint_damping
+    return {
+        "joint_damping_nms_rad": list(r.joint_damping) if r.enabled and r.joint_damping
+        else [damping, damping],
+        "action_delay_s": list(r.action_delay_s) if r.enabled else [0.0, 0.0],
+        "pushes": None if not (r.enabled and r.push_interval_s > 0) else {
+            "interval_s": r.push_interval_s, "velocity_m_s": r.push_velocity,
+            "on_stairs_only": r.push_on_stairs},
+        "height_map": {"offset_m": n.height_offset, "missing": n.height_missing,
+                       "missing_under_body": n.height_missing_body,
+                       "missing_at_edges": n.height_missing_edge} if n.enabled else None,
+        "route": None if route.perturb_prob <= 0 else {
+            "perturb_prob": route.perturb_prob, "lateral_fraction_of_width": route.lateral,
+            "corner_cut_m": route.corner_cut_m, "coarse_points": list(route.coarse_points)},
     }
 
 
@@ -215,6 +240,7 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
         "base_velocity": "the base (trunk) frame origin's linear velocity, in the base frame "
                          "(training: exact; a robot: its state estimator's)",
         "evaluation": _evaluation(cfg),
+        "training": _training(cfg),
         "versions": versions(),
         "policy": {"iteration": meta.get("iteration"), "env_steps": meta.get("env_steps"),
                    "network": meta.get("network"), "config": meta.get("config")},

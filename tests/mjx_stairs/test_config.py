@@ -140,10 +140,13 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
         cfg, _ = experiment.load(path, [], cpu=cpu)
         assert cfg.train.num_envs > 0
     cfg, _ = experiment.load(path, [], cpu=False)
-    # the physics each file says it has: the lean preset or the reference physics
+    # the physics each file says it has: the lean preset, the evaluation physics (the issue-24
+    # generalist, trained where the code risers are judged) or the reference physics
     from mjx_stairs.sim.robot import PHYSICS
 
-    want = PHYSICS["lean" if path.name.endswith("_lean.toml") else "reference"]
+    named = {"generalist.toml": "evaluation"}
+    want = PHYSICS[named.get(path.name, "lean" if path.name.endswith("_lean.toml")
+                             else "reference")]
     assert {k: getattr(cfg.env.robot, k) for k in want} == want
     # the bfloat16 encoder only where its stage-2 training was checked
     bf16 = path.name == "stage2_u_lean.toml"

@@ -1,0 +1,174 @@
+"""What a real Go2 needs, in the stair env (issue 24): joint damping and action delay per robot,
+pushes over the flights, the elevation map's offset and holes, the waypoint on a perturbed route.
+One small env with all of it on (U-shaped level 3, walked up and down, 5 cm grid)."""
+
+import types
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from mujoco import mjx
+
+import terrains
+from mjx_stairs.env import observation
+from mjx_stairs.env import randomization as dr
+from mjx_stairs.env.config import env_config_from
+from mjx_stairs.env.geometry import quat_to_mat
+from mjx_stairs.env.stair_env import StairEnv
+from mjx_stairs.sim import box_world
+from mjx_stairs.sim import robot as rb
+from mjx_stairs.tools import contract
+
+B = 16
+ROBUST = ("goal_mode=waypoint", "episode_length_s=2.0",
+          "randomization.joint_damping=[0.1, 2.0]", "randomization.action_delay_s=[0.0, 0.02]",
+          "randomization.push_on_stairs=true", "noise.height_offset=0.03",
+          "noise.height_missing=0.02", "noise.height_missing_body=0.3",
+          "noise.height_missing_edge=0.2", "route.perturb_prob=1.0")
+
+
+@pytest.fixture(scope="module")
+def env():
+    atlas = terrains.build_atlas(["u_shaped"], levels=[2], variants_per_family=1,
+                                 resolution=0.05, border=1.0, direction="both")
+    return StairEnv(atlas, env_config_from(None, ROBUST))
+
+
+@pytest.fixture(scope="module")
+def rollout(env):
+    """B robots reset on level 0 and stepped 40 times with random actions: (reset, states)."""
+    reset = jax.jit(jax.vmap(env.reset_at))(jax.random.split(jax.random.PRNGKey(0), B),
+                                            jnp.zeros(B, jnp.int32), jnp.zeros(B, jnp.int32))
+    step = jax.jit(jax.vmap(env.step))
+    state, states, key = reset, [], jax.random.PRNGKey(1)
+    for _ in range(40):
+        key, k = jax.random.split(key)
+        state = step(state, 0.5 * jax.random.normal(k, (B, 12)))
+        states.append(state)
+    return reset, states
+
+
+def test_each_robot_draws_its_damping_delay_offset_and_direction(rollout):
+    info = rollout[0].info
+    damping = np.asarray(info["joint_damping"])
+    assert np.all((damping >= 0.1) & (damping <= 2.0)) and len(set(damping)) == B
+    delay = np.asarray(info["delay_steps"])
+    assert set(delay) <= {0, 1, 2, 3, 4} and len(set(delay)) >= 3  # 0..20 ms in 5 ms steps
+    offset = np.asarray(info["height_offset"])
+    assert np.all(np.abs(offset) <= 0.03) and len(set(offset)) == B
+    assert set(np.asarray(info["tile"])) == {0, 1}  # one level, walked up (0) and down (1)
+
+
+def test_the_robots_step_finite_up_to_the_description_damping(rollout):
+    for state in rollout[1]:
+        assert np.all(np.isfinite(np.asarray(state.pipeline_state.qpos)))
+        assert float(state.metrics["nan_reset"].sum()) == 0
+
+
+def test_an_atlas_walked_both_ways_reports_the_way_down(env, rollout):
+    assert env.both_ways and "episode_success_down" in env.metric_names()
+    ended = np.stack([np.asarray(s.metrics["done"]) for s in rollout[1]])
+    down = np.stack([np.asarray(s.metrics["done_down"]) for s in rollout[1]])
+    was_down = np.stack([np.asarray(env.tiles.down)[np.asarray(s.info["tile"])]
+                         for s in [rollout[0]] + rollout[1][:-1]])  # the tile the step walked
+    np.testing.assert_array_equal(down, ended * was_down)
+
+
+def test_the_actor_map_has_holes_the_critic_map_has_none(rollout):
+    actor = np.stack([np.asarray(s.obs["state"])[:, observation.N_VEC:] for s in rollout[1]])
+    critic = np.stack([np.asarray(s.obs["privileged_state"])[:, observation.N_VEC:]
+                       for s in rollout[1]])
+    assert 0.02 < np.mean(actor == 3.0) < 0.2  # 2 % anywhere, 30 % of 15 cells, 20 % at edges
+    assert not np.any(critic == 3.0)
+
+
+def test_the_goal_input_follows_the_episode_route(env, rollout):
+    """The waypoint the policy sees is the sidecar's rule (tools.contract, numpy) applied to the
+    episode's own route, which is not the tile's centre-line."""
+    rule = types.SimpleNamespace(goal_mode="waypoint", lookahead=1.0)
+    goal = slice(observation.N_VEC - 4, observation.N_VEC)
+    moved = 0
+    for state in rollout[1][::10]:
+        for r in range(B):
+            qpos = np.asarray(state.pipeline_state.qpos[r], np.float64)
+            route = np.asarray(state.info["route"][r], np.float64)
+            tile = int(state.info["tile"][r])
+            target = contract.goal_target(rule, qpos[:2], env.goals[tile], route)
+            rot = np.asarray(quat_to_mat(jnp.asarray(qpos[3:7])), np.float64)
+            seen = np.asarray(state.obs["privileged_state"][r, goal])
+            np.testing.assert_allclose(seen[:3], rot.T @ (target[:3] - qpos[:3]), atol=2e-3)
+            line = np.asarray(env.tiles.line3[tile])
+            moved += np.abs(route - line).max() > 0.05
+    assert moved >= B // 2
+
+
+@pytest.fixture(scope="module")
+def actuate(env):
+    return jax.jit(env.actuate)
+
+
+def _standing(env, actuate, qvel_joints: float = 0.0):
+    state = jax.jit(env.reset_at)(jax.random.PRNGKey(5), jnp.int32(0), jnp.int32(0))
+    info = dict(state.info, kp_scale=jnp.float32(1.0), kd_scale=jnp.float32(1.0),
+                motor_strength=jnp.ones(12), joint_damping=jnp.float32(0.1),
+                delay_steps=jnp.int32(0), step=jnp.int32(0))
+    data = state.pipeline_state
+    data = data.replace(qvel=data.qvel.at[env.robot.ids.qvel_joints].set(qvel_joints))
+    return data, info
+
+
+def test_a_delay_of_a_whole_step_holds_the_previous_target(env, actuate):
+    data, info = _standing(env, actuate)
+    before, action = jnp.full(12, 0.8), jnp.full(12, -0.8)
+    late = actuate(data, action, dict(info, delay_steps=jnp.int32(4), last_action=before))[0]
+    held = actuate(data, before, dict(info, delay_steps=jnp.int32(0)))[0]
+    now = actuate(data, action, dict(info, delay_steps=jnp.int32(0)))[0]
+    half = actuate(data, action, dict(info, delay_steps=jnp.int32(2), last_action=before))[0]
+    np.testing.assert_array_equal(np.asarray(late.qpos), np.asarray(held.qpos))
+    assert np.abs(np.asarray(late.qpos) - np.asarray(now.qpos)).max() > 1e-3
+    for other in (late, now):
+        assert np.abs(np.asarray(half.qpos) - np.asarray(other.qpos)).max() > 1e-5
+
+
+def test_damping_is_the_robots_own_and_slows_its_joints(env, actuate):
+    data, info = _standing(env, actuate, qvel_joints=4.0)
+    vj = env.robot.ids.qvel_joints
+    model = dr.robot_model(env.robot.mjx_model, env.robot.ids, dict(info, joint_damping=2.0),
+                           env.config.randomization)
+    np.testing.assert_allclose(np.asarray(model.dof_damping)[vj], 2.0)
+    np.testing.assert_array_equal(np.asarray(model.dof_damping)[:6], 0.0)  # the free joint
+    passive = jax.jit(mjx.forward)(model, data).qfrc_passive
+    np.testing.assert_allclose(np.asarray(passive)[vj], -2.0 * 4.0, rtol=1e-5)
+    speed = {d: np.abs(np.asarray(actuate(data, jnp.zeros(12), dict(
+        info, joint_damping=jnp.float32(d)))[0].qvel)[vj]).sum() for d in (0.1, 2.0)}
+    assert speed[2.0] < 0.9 * speed[0.1]
+
+
+def test_pushes_come_only_over_the_flights(env):
+    over = jax.jit(env.actuate.over_flights)
+    tile = 0
+    spawn, goal = np.asarray(env.tiles.spawn[tile]), np.asarray(env.goals[tile])
+    line = np.asarray(env.tiles.line3[tile])
+    z = env.terrain_height(jnp.asarray(line[:, 0]), jnp.asarray(line[:, 1]))
+    mid = line[int(np.argmin(np.abs(np.asarray(z) - 0.5 * float(z.max()))))]
+    where = {"spawn": spawn[:2], "goal": goal[:2], "mid-flight": mid[:2]}
+    got = {k: bool(over(jnp.asarray([*xy, 1.0] + [0.0] * 16), jnp.int32(tile)))
+           for k, xy in where.items()}
+    assert got == {"spawn": False, "goal": False, "mid-flight": True}
+    data = mjx.make_data(env.robot.mjx_model)
+    info = {"rng": jax.random.PRNGKey(0)}
+    r = env.config.randomization
+    kicked = dr.push_on_stairs(data, info, r, 1, jnp.bool_(True)).qvel[:2]
+    assert 0 < float(jnp.abs(kicked).max()) <= r.push_velocity
+    calm = dr.push_on_stairs(data, info, r, 1, jnp.bool_(False)).qvel
+    np.testing.assert_array_equal(np.asarray(calm), 0.0)
+
+
+def test_robot_joint_damping_builds_into_the_model_and_the_ground_truth():
+    assert rb.build_mj_model(None, 0.5).dof_damping[6:].tolist() == [rb.JOINT_DAMPING] * 12
+    two = rb.RobotConfig(joint_damping=2.0)
+    damped = rb.build_mj_model(None, 0.5, two).dof_damping
+    assert damped[6:].tolist() == [2.0] * 12 and damped[:6].tolist() == [0.0] * 6
+    boxes = box_world.build_model(np.zeros((0, 6)), two).dof_damping
+    assert boxes.tolist() == damped.tolist()
