@@ -53,7 +53,8 @@ def _start(out: Path, devices: int, *args: str, **variables: str) -> subprocess.
     out.mkdir(parents=True, exist_ok=True)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MJX_STAIRS_", "JAX_"))}
     env.update(PYTHONPATH=str(ROOT), JAX_PLATFORMS="cpu",
-               XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}", **variables)
+               XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} "  # the session's (conftest.py)
+               f"--xla_force_host_platform_device_count={devices}", **variables)
     log = (out / f"log_{variables.get('MJX_STAIRS_PROCESS_ID', 0)}.txt").open("w")
     return subprocess.Popen([sys.executable, "-m", "tests.mjx_stairs.rl.distributed_run",
                              str(out), *args], cwd=ROOT, env=env, stdout=log,

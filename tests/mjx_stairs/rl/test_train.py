@@ -142,36 +142,42 @@ def test_chunk_save_load_chunk_is_bit_exact(tmp_path):
     assert _leaves_equal(m2, m2b)
 
 
+RUN_CFG = LearnerConfig(
+    train=TrainConfig(num_envs=16, unroll_length=8, iterations_per_chunk=2),
+    ppo=PPOConfig(num_minibatches=4, num_epochs=2),
+)  # the runner's tests: chunks of 2 iterations of 128 env steps (cheap to run)
+
+
 def _run_cfg(tmp_path, **kw):
-    """LEARN_CFG's compiled shapes (one compile serves every test) with host options."""
-    t = replace(LEARN_CFG.train, total_iterations=20, log_dir=str(tmp_path / "runs"),
+    """RUN_CFG's compiled shapes (one compile serves every runner test) with host options."""
+    t = replace(RUN_CFG.train, total_iterations=4, log_dir=str(tmp_path / "runs"),
                 experiment="toy", seed=7, progress=False, console=False, checkpoint_every=1,
                 keep_checkpoints=2)
-    return replace(LEARN_CFG, train=replace(t, **kw))
+    return replace(RUN_CFG, train=replace(t, **kw))
 
 
 def test_run_then_resume_equals_one_run(tmp_path):
     env = TOY
     full = runner.run(_run_cfg(tmp_path / "a"), env)
-    assert full.stop_reason == "total_iterations" and int(full.state.iteration) == 20
+    assert full.stop_reason == "total_iterations" and int(full.state.iteration) == 4
 
-    half = runner.run(_run_cfg(tmp_path / "b", total_iterations=10), env)
-    assert int(half.state.iteration) == 10
+    half = runner.run(_run_cfg(tmp_path / "b", total_iterations=2), env)
+    assert int(half.state.iteration) == 2
     resumed = runner.run(_run_cfg(tmp_path / "b"), env, run_dir=half.run_dir, resume=True)
-    assert resumed.run_dir == half.run_dir and int(resumed.state.iteration) == 20
+    assert resumed.run_dir == half.run_dir and int(resumed.state.iteration) == 4
     assert _leaves_equal(full.state, resumed.state)
 
     run_dir = resumed.run_dir
     assert re.fullmatch(r"toy__7__\d{8}-\d{6}", run_dir.name), run_dir.name
     lines = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()]
-    assert [x["iteration"] for x in lines] == [10, 20]
-    assert [x["env_steps"] for x in lines] == [20480, 40960]
+    assert [x["iteration"] for x in lines] == [2, 4]
+    assert [x["env_steps"] for x in lines] == [256, 512]
     for key in ("wall_time", "perf/steps_per_s", "episode/return", "episode/length", "success",
                 "level", "reward/dist", "loss/policy", "loss/value", "loss/kl", "opt/lr"):
         assert key in lines[-1], key
     assert list((run_dir / "tb").iterdir())
     ckpts = [p.name for p in checkpoint.list_checkpoints(run_dir / "checkpoints")]
-    assert ckpts == ["state_00000010.npz", "state_00000020.npz"]
+    assert ckpts == ["state_00000002.npz", "state_00000004.npz"]
     assert json.loads((run_dir / "config.json").read_text())["train"]["seed"] == 7
 
     policy_file = run_dir / "policy.npz"
@@ -184,16 +190,16 @@ def test_run_then_resume_equals_one_run(tmp_path):
     assert policy_lib.policy_value(policy, obs).shape == (3,)
 
     # resume from a state file carried elsewhere, into a fresh run directory
-    ck = half.run_dir / "checkpoints" / "state_00000010.npz"
+    ck = half.run_dir / "checkpoints" / "state_00000002.npz"
     moved = tmp_path / "carried.npz"
     moved.write_bytes(ck.read_bytes())
     other = runner.run(_run_cfg(tmp_path / "d"), env, run_dir=tmp_path / "d" / "r", resume=moved)
     assert _leaves_equal(full.state, other.state)
-    assert (tmp_path / "d" / "r" / "checkpoints" / "state_00000020.npz").exists()
+    assert (tmp_path / "d" / "r" / "checkpoints" / "state_00000004.npz").exists()
 
     # resuming a finished run does nothing more; --resume without a run fails clearly
     again = runner.run(_run_cfg(tmp_path / "b"), env, resume=True)
-    assert again.run_dir == run_dir and int(again.state.iteration) == 20
+    assert again.run_dir == run_dir and int(again.state.iteration) == 4
     with pytest.raises(FileNotFoundError, match="no run 'toy__7__"):
         runner.run(_run_cfg(tmp_path / "c"), env, resume=True)
 
@@ -201,7 +207,7 @@ def test_run_then_resume_equals_one_run(tmp_path):
 def test_packed_env_checkpoints_resume(tmp_path):
     env = TOY
     full = runner.run(_run_cfg(tmp_path / "a", checkpoint_env="packed"), env)
-    half = runner.run(_run_cfg(tmp_path / "b", total_iterations=10, checkpoint_env="packed"), env)
+    half = runner.run(_run_cfg(tmp_path / "b", total_iterations=2, checkpoint_env="packed"), env)
     ck = checkpoint.latest_checkpoint(half.run_dir / "checkpoints")
     assert checkpoint.load_metadata(ck)["env_format"] == "packed"
     assert not any("final_obs" in k for k in checkpoint.load(ck)[0])
@@ -216,17 +222,17 @@ def test_packed_env_checkpoints_resume(tmp_path):
 
 def test_stops_on_env_steps_and_time_budget(tmp_path):
     env = TOY
-    r = runner.run(_run_cfg(tmp_path, total_iterations=100, max_env_steps=30000), env)
-    # whole chunks of 20480 steps: stops once 30000 are reached
-    assert r.stop_reason == "max_env_steps" and int(r.state.iteration) == 20
-    assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000020.npz"
+    r = runner.run(_run_cfg(tmp_path, total_iterations=100, max_env_steps=300), env)
+    # whole chunks of 256 steps: stops once 300 are reached
+    assert r.stop_reason == "max_env_steps" and int(r.state.iteration) == 4
+    assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000004.npz"
     r = runner.run(_run_cfg(tmp_path, total_iterations=100, time_budget_s=0.5), env)
     assert r.stop_reason == "time_budget" and int(r.state.iteration) == 0
     stops = []
     r = runner.run(_run_cfg(tmp_path, total_iterations=100),
                   env, on_chunk=lambda rec: stops.append(rec["iteration"]) or len(stops) == 3)
-    assert r.stop_reason == "on_chunk" and stops == [10, 20, 30]
-    assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000030.npz"
+    assert r.stop_reason == "on_chunk" and stops == [2, 4, 6]
+    assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000006.npz"
 
 
 # ----------------------------------------------------------------------------- devices

@@ -32,7 +32,8 @@ def test_scaling_rows_run_on_the_devices_they_name():
     """Two devices, weak (2 per device) and strong (4 in all): one row measured once (an MJX
     compile takes ~20-45 s on this CPU), its physics split over both devices."""
     env = dict(os.environ, PYTHONPATH=str(ROOT), JAX_PLATFORMS="cpu",
-               XLA_FLAGS="--xla_force_host_platform_device_count=2")
+               XLA_FLAGS=os.environ.get("XLA_FLAGS", "")  # the session's (conftest.py)
+               + " --xla_force_host_platform_device_count=2")
     proc = subprocess.run([sys.executable, "-c", SCRIPT.format(tiny=TINY)], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=400)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
