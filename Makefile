@@ -12,6 +12,9 @@ HAS_GPU := $(shell command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/
 comma := ,
 EXTRAS := dev$(if $(HAS_GPU),$(comma)cuda)
 ARGS ?=
+# make test's pytest-xdist workers (0: all in one process). Files are handed out whole
+# (--dist loadfile), so a module's fixtures (a trained policy, a compiled env) are built once.
+TEST_WORKERS ?= 2
 
 .PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-generalist ablation eval exp1 transfer-matrix bench clean-venv
 
@@ -24,10 +27,10 @@ $(VENV)/.installed: pyproject.toml
 setup: $(SETUP)
 
 test: $(SETUP)
-	JAX_PLATFORMS=cpu $(PY) -m pytest tests
+	JAX_PLATFORMS=cpu $(PY) -m pytest tests -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(SETUP)
-	$(PY) -m ruff check mjx_stairs terrains tests
+	$(PY) -m ruff check .
 
 train-stage1: $(SETUP)
 	$(PY) -m mjx_stairs train experiments/stage1.toml $(ARGS)
