@@ -22,13 +22,14 @@ RES = 0.05
 SIM_STEPS = 400  # 2 s at 5 ms
 
 
-HOLD_CHUNK = 20  # steps per compiled call: every model of one collider shares one program
+HOLD_CHUNK = 20  # steps per compiled call (a program per collider and heightfield size)
 
 
 @jax.jit
 def _hold_chunk(mx, d, qpos_joints, qvel_joints):
     """HOLD_CHUNK MJX steps with PD holding the nominal pose; the model is an argument, so
-    models that differ only in their heights share the compiled program."""
+    models of one collider whose heightfields have the same size (grid and elevation range: MJX
+    keeps hfield_size static) share the compiled program, and a test holds for any length."""
     limit = jnp.asarray(rb.TORQUE_LIMIT)
     target = jnp.asarray(rb.NOMINAL_JOINT_POS)
 
