@@ -46,7 +46,7 @@ train-stage2-fast: $(SETUP)  # lean settings (issue 7): 417 k vs 187 k env steps
 	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/stage2_u_lean.toml $(ARGS)
 
 train-generalist: $(SETUP)  # issue 24: building stairs up and down, robust to a real Go2 (from stage 1)
-	$(PY) -m mjx_stairs train experiments/generalist.toml $(ARGS)
+	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/generalist.toml $(ARGS)
 
 ablation: $(SETUP)
 	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/stage2_u_no_stall.toml $(ARGS)
