@@ -108,8 +108,10 @@ def actuate(env):
     return jax.jit(env.actuate)
 
 
-def _standing(env, actuate, qvel_joints: float = 0.0):
-    state = jax.jit(env.reset_at)(jax.random.PRNGKey(5), jnp.int32(0), jnp.int32(0))
+def _standing(env, rollout, qvel_joints: float = 0.0):
+    """Robot 0 as reset for the rollout (at the spawn; the reset program compiled once), with
+    unit gains, the training MJCF's damping and no delay."""
+    state = jax.tree_util.tree_map(lambda x: x[0], rollout[0])
     info = dict(state.info, kp_scale=jnp.float32(1.0), kd_scale=jnp.float32(1.0),
                 motor_strength=jnp.ones(12), joint_damping=jnp.float32(0.1),
                 delay_steps=jnp.int32(0), step=jnp.int32(0))
@@ -118,8 +120,8 @@ def _standing(env, actuate, qvel_joints: float = 0.0):
     return data, info
 
 
-def test_a_delay_of_a_whole_step_holds_the_previous_target(env, actuate):
-    data, info = _standing(env, actuate)
+def test_a_delay_of_a_whole_step_holds_the_previous_target(env, rollout, actuate):
+    data, info = _standing(env, rollout)
     before, action = jnp.full(12, 0.8), jnp.full(12, -0.8)
     late = actuate(data, action, dict(info, delay_steps=jnp.int32(4), last_action=before))[0]
     held = actuate(data, before, dict(info, delay_steps=jnp.int32(0)))[0]
@@ -131,8 +133,8 @@ def test_a_delay_of_a_whole_step_holds_the_previous_target(env, actuate):
         assert np.abs(np.asarray(half.qpos) - np.asarray(other.qpos)).max() > 1e-5
 
 
-def test_damping_is_the_robots_own_and_slows_its_joints(env, actuate):
-    data, info = _standing(env, actuate, qvel_joints=4.0)
+def test_damping_is_the_robots_own_and_slows_its_joints(env, rollout, actuate):
+    data, info = _standing(env, rollout, qvel_joints=4.0)
     vj = env.robot.ids.qvel_joints
     model = dr.robot_model(env.robot.mjx_model, env.robot.ids, dict(info, joint_damping=2.0),
                            env.config.randomization)

@@ -108,7 +108,8 @@ def trained(tmp_path_factory):
     root = tmp_path_factory.mktemp("generalist")
     code = cli.main(["train", TOML, "init_from=experiments/results/stage1/policy.npz",
                      "train.num_envs=8", "train.unroll_length=8", "train.total_iterations=2",
-                     "train.iterations_per_chunk=1", f"train.log_dir={root / 'runs'}",
+                     "train.iterations_per_chunk=1", "ppo.num_epochs=1",
+                     f"train.log_dir={root / 'runs'}",
                      f"publish_dir={root / 'out'}", "train.progress=false",
                      "train.console=false", "train.tensorboard=false", "terrain.levels=[0, 9]",
                      "terrain.variants.building=11", "env.episode_length_s=1.0"])
