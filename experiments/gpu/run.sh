@@ -19,9 +19,10 @@
 set -uo pipefail
 T0=$(date +%s)
 DEADLINE=$1; shift
-if [ -z "${SKIP_INSTALL:-}" ]; then  # SKIP_INSTALL=1: the packages are already importable
+if [ -z "${SKIP_INSTALL:-}" ]; then  # SKIP_INSTALL=1: the packages are already importable;
+  # WHL=.whl_slim: another wheelhouse folder (one without the CUDA wheels the host has)
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-    --target /tmp/site .whl/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
+    --target /tmp/site ${WHL:-.whl}/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
 fi
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"
@@ -31,7 +32,8 @@ python3 -c "import jax, mujoco; print('jax', jax.__version__, jax.devices(), 'mu
 
 train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz when carried
   local name=$1 toml=$2; shift 2
-  local budget=$(( $(left) - 25 ))
+  local budget=$(( $(left) - 25 ))  # TRAIN_BUDGET_S: less, to leave time for later steps
+  [ -n "${TRAIN_BUDGET_S:-}" ] && [ "$TRAIN_BUDGET_S" -lt "$budget" ] && budget=$TRAIN_BUDGET_S
   local resume=() prev=".carry/$name"
   [ -f "$prev/state.npz" ] && resume=(--resume "$prev/state.npz")
   echo "== $name: budget ${budget}s ${resume[*]}"
@@ -127,6 +129,22 @@ for step in "$@"; do
       python3 -m mjx_stairs transfer-matrix --config $models --robots 1000 \
         --env $REFERENCE \
         --out "$OUT/transfer_lean" 2>&1 | grep -v warp ;;
+    # issue 24: the generalist (experiments/generalist.toml, from the stage-1 policy, evaluation
+    # physics); resumes from .carry/generalist/. bench-generalist: its physics-only rate at 4096
+    # robots on its own atlas, for the training rate the run logs
+    generalist) train generalist experiments/generalist.toml ;;
+    # the generalist (trained in this command, else carried) on the paper's test levels of the
+    # four families, 1000 robots per level, up then down (GEN_DIRECTIONS), each cut at the deadline
+    eval-generalist)
+      p=/tmp/policies/generalist.npz; [ -f "$p" ] || p=.carry/generalist/policy.npz
+      for dir in ${GEN_DIRECTIONS:-up down}; do
+        [ "$(left)" -lt 90 ] && { echo "no time left for $dir"; break; }
+        timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
+          --family straight l_shaped u_shaped spiral --direction "$dir" \
+          --out "$OUT/generalist_eval/$dir" 2>&1 | grep -v warp
+      done ;;
+    bench-generalist) bench "$OUT/bench/generalist_physics.json" experiments/generalist.toml \
+        --robots 4096 --parts physics ;;
     # throughput: (a) physics, (b) env, (r) rollout, (c) training at 4096 and 16 384 robots, in the
     # reference physics (make bench) and with the lean settings of stage2_u_lean.toml
     bench) bench "$OUT/bench.json" experiments/stage2_u.toml --robots 4096 16384 ;;
@@ -164,8 +182,11 @@ for step in "$@"; do
       abl=(); [ -f "$pa" ] && abl=(--ablation "$pa")
       python3 -m mjx_stairs exp1-report --stage2 "$p2" "${abl[@]}" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
-    pack)  # only 8 files come back from a device command: one tar per output folder
-      shopt -s nullglob; for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"; done
+    pack)  # only 8 files of at most 16 MiB come back from a device command: one tar per output
+      # folder, cut in 15 MiB parts (NAME.tar.00, .01: cat them back together) where larger
+      shopt -s nullglob; for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"
+        if [ "$(stat -c %s "$d.tar")" -gt 15728640 ]; then split -b 15M -d "$d.tar" "$d.tar." && rm "$d.tar"; fi
+      done
       ls -la "$OUT" ;;
     *) echo "unknown step $step"; exit 2 ;;
   esac

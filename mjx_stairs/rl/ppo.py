@@ -9,6 +9,7 @@ lr, clip, Adam). Everything is pure jnp, so it runs inside the trainer's compile
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Literal, NamedTuple
 
@@ -41,6 +42,10 @@ class PPOConfig:
         default=0.2, metadata={"help": "value clip around the rollout value (0 = unclipped loss)"}
     )
     entropy_coef: float = field(default=0.005, metadata={"help": "entropy bonus weight"})
+    max_std: float = field(
+        default=0.0,
+        metadata={"help": "upper bound of the policy std, applied after each Adam step (0 = none)"},
+    )
     value_loss_coef: float = field(default=1.0, metadata={"help": "value loss weight"})
     max_grad_norm: float = field(default=1.0, metadata={"help": "global-norm clip (0 = off)"})
     normalize_advantages: bool = field(
@@ -223,6 +228,8 @@ def minibatch_step(
     params, opt_state = optim.adam_update(
         grads, opt_state, params, cfg.adam_b1, cfg.adam_b2, cfg.adam_eps
     )
+    if cfg.max_std > 0:  # projected step: the std stays where exploration still means something
+        params = dict(params, log_std=jnp.minimum(params["log_std"], math.log(cfg.max_std)))
     aux = dict(aux, **{"opt/grad_norm": grad_norm, "opt/lr": opt_state.lr})
     return (params, opt_state), aux
 

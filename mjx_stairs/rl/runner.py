@@ -208,6 +208,9 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
                           stacklevel=3)
         if main:
             logger.truncate_jsonl(run_dir / "metrics.jsonl", int(meta["iteration"]))
+            if not (run_dir / "config.json").exists():  # resumed into a new run dir
+                atomic.write_text(run_dir / "config.json",
+                                  json.dumps(config_dict(config), indent=2))
         _say(f"resumed {path} at iteration {meta['iteration']}")
         return state
     state = trainer.init(jax.random.PRNGKey(config.train.seed))

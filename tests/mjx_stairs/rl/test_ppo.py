@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from brax.training.agents.ppo.losses import compute_gae as brax_compute_gae
@@ -168,6 +169,24 @@ def test_update_runs_epochs_and_adapts_lr(setup):
     with pytest.raises(ValueError, match="does not split into 5 minibatches"):
         ppo.update(params, opt, norm, data, jax.random.PRNGKey(1),
                    dataclasses.replace(cfg, num_minibatches=5), NET, LAYOUT)
+
+
+def test_max_std_bounds_the_std_after_each_step(setup):
+    """ppo.max_std projects log_std after every Adam step: an entropy bonus that alone pushes
+    the std up (zero advantages) moves it above the bound without it, not with it."""
+    params, norm = setup
+    params = dict(params, log_std=jnp.full_like(params["log_std"], np.log(0.99)))
+    data = _batch(params, norm, n=64)
+    data = jax.tree_util.tree_map(lambda x: x.reshape(8, 8, *x.shape[1:]),
+                                  data._replace(advantage=jnp.zeros_like(data.advantage)))
+    cfg = PPOConfig(num_epochs=2, num_minibatches=2, learning_rate=1e-2, lr_schedule="fixed",
+                    entropy_coef=1.0)
+    opt = optim.adam_init(params, cfg.learning_rate)
+    free = ppo.update(params, opt, norm, data, jax.random.PRNGKey(1), cfg, NET, LAYOUT)[0]
+    bound = ppo.update(params, opt, norm, data, jax.random.PRNGKey(1),
+                       dataclasses.replace(cfg, max_std=1.0), NET, LAYOUT)[0]
+    assert float(jnp.exp(free["log_std"]).min()) > 1.01
+    np.testing.assert_allclose(np.exp(np.asarray(bound["log_std"])), 1.0, rtol=1e-6)
 
 
 def test_network_conv_impl_reaches_the_encoder(setup):

@@ -196,6 +196,8 @@ def test_run_then_resume_equals_one_run(tmp_path):
     other = runner.run(_run_cfg(tmp_path / "d"), env, run_dir=tmp_path / "d" / "r", resume=moved)
     assert _leaves_equal(full.state, other.state)
     assert (tmp_path / "d" / "r" / "checkpoints" / "state_00000004.npz").exists()
+    # the fresh run directory gets the config, so the run can be published from it
+    assert json.loads((tmp_path / "d" / "r" / "config.json").read_text())["train"]["seed"] == 7
 
     # resuming a finished run does nothing more; --resume without a run fails clearly
     again = runner.run(_run_cfg(tmp_path / "b"), env, resume=True)
