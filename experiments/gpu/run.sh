@@ -4,18 +4,26 @@
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
 # Steps (end with pack, since only 8 files come back), each reproducing a published result
 # (docs/results.md names the steps that produced each number; one-off exploratory steps are in
-# git show 699f1d5:experiments/gpu/run.sh): stage1, stage2, ablation, stage2-final-goal, report
-# (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean (the lean physics and its
-# check in the reference physics), straight-lean, l-shaped-lean, spiral-lean, transfer-lean
-# (Tables 1-2), bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml),
-# scaling (bench --devices over the GPUs visible), two-processes (one process on two GPUs against
-# two processes through jax.distributed), eval-committed (committed policies in the reference
-# physics), code-suite (issue 23: the code suite baseline), pack. Each training step stops and
+# git show 699f1d5:experiments/gpu/run.sh; the one-off session scripts folded into the steps below
+# are in git show b53571c:experiments/gpu/, e.g. session_eval4.sh): stage1, stage2, ablation,
+# stage2-final-goal, report (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean
+# (the lean physics and its check in the reference physics), straight-lean, l-shaped-lean,
+# spiral-lean, transfer-lean (Tables 1-2), generalist, eval-generalist, bench-generalist (issue 24),
+# bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml), scaling (bench
+# --devices over the GPUs visible), two-processes (one process on two GPUs against two processes
+# through jax.distributed), eval-committed (committed policies in the reference physics), code-suite
+# (issue 23: the code suite baseline), fidelity, fidelity-x64, bench-colliders (issue 19: MJX
+# physics options against the ground truth, their speed), transfer-eval, rq1-eval (the transfer
+# matrix and the RQ1 policies in the evaluation physics), pack; and on the host's CPUs beside the
+# GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
+# sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
 # carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
-# stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command.
+# stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command. The CPU
+# steps start a background job and return at once; pack (or the end of the script) waits for them
+# until 10 s before the deadline and copies what they wrote to $OUT/<name>/.
 set -uo pipefail
 T0=$(date +%s)
 DEADLINE=$1; shift
@@ -66,6 +74,54 @@ LEAN="env.robot.terrain_contacts=nearest env.robot.shin_collision=false env.robo
 bench() {  # bench OUT_FILE CONFIG [overrides and options...]
   local out=$1 toml=$2; shift 2; mkdir -p "$(dirname "$out")"
   python3 -m mjx_stairs bench --config "$toml" "$@" --out "$out" 2>&1 | grep -v warp
+}
+
+# Background jobs on the host's CPUs (the ground truth, sim-to-sim) write under $BG, outside
+# $OUT, and are copied to $OUT by collect.
+BG=/tmp/bg.$$
+background() {  # background NAME CMD...: CMD with JAX_PLATFORMS=cpu, in the background, stopped
+  # 20 s before the deadline; it writes $BG/NAME/, its log goes to $BG/NAME.log
+  local name=$1; shift
+  local budget=$(( $(left) - 20 ))
+  [ "$budget" -lt 60 ] && { echo "no time left for $name"; return; }
+  mkdir -p "$BG/$name"
+  ( JAX_PLATFORMS=cpu timeout "$budget" "$@" > "$BG/$name.log" 2>&1 & echo $! > "$BG/$name.pid" )
+  echo "== $name: on the CPUs in the background, ${budget}s, log $name.log"
+}
+
+collect() {  # wait for the background jobs (until 10 s before the deadline), then copy each one's
+  # folder and log to $OUT/NAME/ and $OUT/NAME.log, finished or not (files are written whole)
+  [ -d "$BG" ] || return 0
+  local f p name alive
+  while [ "$(left)" -gt 10 ]; do
+    alive=0
+    for f in $(find "$BG" -name '*.pid'); do kill -0 "$(cat "$f")" 2>/dev/null && alive=1; done
+    [ "$alive" = 0 ] && break
+    sleep 5
+  done
+  for f in $(find "$BG" -name '*.pid'); do
+    name=${f#"$BG"/}; name=${name%.pid}; p=$(cat "$f")
+    kill -0 "$p" 2>/dev/null && echo "$name still running: copying what it wrote"
+    mkdir -p "$OUT/$name" && cp -r "$BG/$name/." "$OUT/$name/" \
+      && cp "$BG/$name.log" "$OUT/$name.log"
+    rm -f "$OUT/$name"/policy.onnx* "$f"  # sim2sim's ONNX export is committed
+    echo "== $name collected at $(( $(date +%s) - T0 ))s"; tail -3 "$OUT/$name.log"
+  done
+}
+
+fidelity_mjx() {  # fidelity_mjx OPTION [x64]: fidelity.py mjx (1000 robots per cell) into the
+  # option's published folder under $OUT/ground_truth/, FIDELITY_CELLS (default: every cell)
+  local opt=$1 x64=${2:-} dir env=()
+  case $opt in
+    reference|lean|nearest_full) dir=mjx ;; columns|columns_converged) dir=mjx_columns ;;
+    evaluation) dir=mjx_eval ;; *) dir=mjx_$opt ;;
+  esac
+  [ -n "$x64" ] && { dir=mjx_x64; env=(JAX_ENABLE_X64=1); }
+  [ "$(left)" -lt 90 ] && { echo "no time left for $opt"; return; }
+  mkdir -p "$OUT/ground_truth"
+  env "${env[@]}" timeout $(( $(left) - 15 )) python3 experiments/gpu/fidelity.py mjx \
+    "$OUT/ground_truth/$dir" --options "$opt" --cells "${FIDELITY_CELLS:-}" 2>&1 | grep -v warp \
+    | tee -a "$OUT/ground_truth/$dir.log"
 }
 
 two_processes() {  # the same short stage-2 run: one process on GPUs 0,1, then two processes of
@@ -168,10 +224,92 @@ for step in "$@"; do
       done ;;
     # issue 23: the committed policies on the code suite (up and down, 1000 robots per case), and
     # eval --mesh against eval --family on U-shaped test level 3; CODE_SUITE_ARGS (e.g. --steps
-    # suite --policies stage1,stage2_u) picks a part; finished files are kept when re-run
+    # suite --policies stage1,stage2_u) picks a part; finished files are kept when re-run. The
+    # published table (docs/results.md section 7): CODE_SUITE_ARGS="--steps suite --policies
+    # stage2_u", then "--steps suite,mesh --policies stage2_u_lean,stage1"
     code-suite)
       python3 experiments/gpu/code_suite.py "$OUT/code_suite" ${CODE_SUITE_ARGS:-} 2>&1 \
         | grep -v warp ;;
+    # issue 19 (docs/results.md section 5b): the published policies in MJX physics options on the
+    # 36 fidelity cells, into the published folders under $OUT/ground_truth/. FIDELITY_OPTIONS
+    # (default evaluation: mjx_eval/, section 1's evaluation-physics row and the fidelity table's
+    # last row; columns,columns_converged: mjx_columns/; reference,lean,nearest_full: mjx/;
+    # mjx_converged: mjx_converged/), FIDELITY_CELLS (indices into fidelity.py's CELLS; default
+    # every one; the published float32 columns_converged: 8,9,15,16,17). fidelity-x64: the same
+    # with the physics in float64 (JAX_ENABLE_X64=1; default columns_converged on every cell,
+    # mjx_x64/). fidelity_table.py (no GPU) rebuilds ground_truth/table.md from the folders
+    fidelity|fidelity-x64)
+      x64=; opts=${FIDELITY_OPTIONS:-evaluation}
+      [ "$step" = fidelity-x64 ] && { x64=1; opts=${FIDELITY_OPTIONS:-columns_converged}; }
+      for opt in ${opts//,/ }; do fidelity_mjx "$opt" $x64; done ;;
+    # the ground truth of section 5b: CPU MuJoCo on box stairs, 1000 episodes per cell
+    # (ground_truth/gt1000/), on the host's CPUs beside the GPU steps. Longer than one command:
+    # GT_CELLS splits it (published: 7,8,9,14,15,16,17 beside fidelity with FIDELITY_OPTIONS=
+    # columns,columns_converged and bench-colliders, then 0,1,2,3,4,5,6,10,11,12,13 beside
+    # fidelity-x64 and fidelity with FIDELITY_OPTIONS=columns_converged
+    # FIDELITY_CELLS=8,9,15,16,17); CPU_WORKERS (14 of 16 cores)
+    ground-truth)
+      background ground_truth/gt1000 python3 experiments/gpu/fidelity.py gt \
+        "$BG/ground_truth/gt1000" --robots 1000 --workers "${CPU_WORKERS:-14}" \
+        --cells "${GT_CELLS:-}" ;;
+    # section 5b's speed: physics-only env steps/s of the reference and lean physics, each with its
+    # own collider and with the columns collider, 4096 robots (stage2_u_lean.toml), 3 repeats,
+    # into $OUT/ground_truth/bench_colliders/
+    bench-colliders)
+      for p in "reference" "reference env.robot.terrain_contacts=columns" "lean" \
+               "lean env.robot.terrain_contacts=columns"; do
+        [ "$(left)" -lt 115 ] && { echo "no time left for $p"; break; }
+        read -r phys extra <<< "$p"; name=$(echo "$p" | tr ' =.' '___')
+        mkdir -p "$OUT/ground_truth/bench_colliders"
+        timeout 100 python3 -m mjx_stairs bench --config experiments/stage2_u_lean.toml \
+          --robots 4096 --parts physics --repeats 3 "env.robot.physics=$phys" $extra \
+          --out "$OUT/ground_truth/bench_colliders/bench_$name.json" 2>&1 | grep -v warp
+      done ;;
+    # issue 25, docs/deploy.md's sim-to-sim table: stage2_u's committed ONNX export
+    # (experiments/results/sim2sim/stage2_u/) in CPU MuJoCo with the full-geometry Go2 on the
+    # U-shaped test levels, on the host's CPUs beside the GPU steps, into $OUT/sim2sim/<folder>:
+    # sim2sim (the description's joint damping 2, 200 episodes per level: stage2_u/), sim2sim-
+    # damping01 (training's damping 0.1 in go2_full_damping01.xml, a copy of go2_full.xml written
+    # beside it, untracked: stage2_u_damping01/),
+    # sim2sim-latency20 (20 ms action latency: stage2_u_latency20/), 50 episodes per level
+    # (S2S_EPISODES). S2S_WORKERS: 14 (published: 7 each for two at once). The MJX column comes
+    # from the committed fidelity runs (reference physics for sim2sim, evaluation physics for the
+    # others). The wheelhouse needs onnxruntime (../shared/gpu/wheelhouse.sh DIR
+    # onnxruntime==1.32.0)
+    sim2sim|sim2sim-damping01|sim2sim-latency20)
+      s2s=(--mjx-json experiments/results/ground_truth/mjx_eval/mjx_evaluation.json --chunk 5)
+      case $step in
+        sim2sim) name=stage2_u; eps=200
+          s2s=(--mjx-json experiments/results/ground_truth/mjx/mjx_reference.json) ;;
+        sim2sim-damping01) name=stage2_u_damping01; eps=50
+          sed 's/damping="2"/damping="0.1"/' mjx_stairs/sim/assets/go2_full.xml \
+            > mjx_stairs/sim/assets/go2_full_damping01.xml
+          s2s+=(--robot mjx_stairs/sim/assets/go2_full_damping01.xml) ;;
+        sim2sim-latency20) name=stage2_u_latency20; eps=50; s2s+=(--latency-ms 20) ;;
+      esac
+      mkdir -p "$BG/sim2sim/$name"
+      cp experiments/results/sim2sim/stage2_u/policy.onnx* "$BG/sim2sim/$name/"
+      background "sim2sim/$name" python3 experiments/gpu/sim2sim_table.py --cells u_shaped \
+        --episodes "${S2S_EPISODES:-$eps}" --workers "${S2S_WORKERS:-14}" \
+        --out "$BG/sim2sim/$name" "${s2s[@]}" ;;
+    # issue 19: tables of the reference physics re-evaluated in the evaluation physics (every
+    # evaluation's default), 1000 robots per cell: transfer-eval, the lean transfer matrix (Tables
+    # 1-2, experiments/results/transfer_lean/models.toml) into $OUT/transfer_lean_eval; rq1-eval,
+    # the RQ1 policies beside stage2_u (whose re-evaluation is step fidelity's mjx_eval/): the
+    # no-stall ablation and the paper's final goal with and without the stall penalty, into
+    # $OUT/rq_eval
+    transfer-eval)
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
+      timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix \
+        --config experiments/results/transfer_lean/models.toml --robots 1000 \
+        --out "$OUT/transfer_lean_eval" 2>&1 | grep -v warp ;;
+    rq1-eval)
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
+      timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint \
+        experiments/results/stage2_u_no_stall/policy.npz \
+        experiments/results/stage2_u_final_goal/policy.npz \
+        experiments/results/stage2_u_final_goal_no_stall/policy.npz \
+        --robots 1000 --out "$OUT/rq_eval" 2>&1 | grep -v warp ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out
@@ -183,7 +321,9 @@ for step in "$@"; do
       python3 -m mjx_stairs exp1-report --stage2 "$p2" "${abl[@]}" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
     pack)  # only 8 files of at most 16 MiB come back from a device command: one tar per output
-      # folder, cut in 15 MiB parts (NAME.tar.00, .01: cat them back together) where larger
+      # folder, cut in 15 MiB parts (NAME.tar.00, .01: cat them back together) where larger; the
+      # background jobs' output first
+      collect
       shopt -s nullglob; for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"
         if [ "$(stat -c %s "$d.tar")" -gt 15728640 ]; then split -b 15M -d "$d.tar" "$d.tar." && rm "$d.tar"; fi
       done
@@ -192,3 +332,4 @@ for step in "$@"; do
   esac
   echo "== $step done at $(( $(date +%s) - T0 ))s"
 done
+collect  # background jobs started after the last pack (or with no pack)
