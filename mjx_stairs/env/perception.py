@@ -27,13 +27,17 @@ def missing(noise: NoiseConfig) -> bool:
 
 
 def draw(rng: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
-    """This episode's draw: {"height_offset": []} when configured, else {}."""
+    """This episode's draws, each when configured: {"height_offset": [] (m), "missing_scale": []
+    (the missing cells' chances times this, uniform in [0, 1])}."""
     noise = config.noise
-    if not (noise.enabled and noise.height_offset > 0):
-        return {}
-    o = noise.height_offset
-    return {"height_offset": jax.random.uniform(jax.random.fold_in(rng, 3), (), minval=-o,
-                                                maxval=o)}
+    out = {}
+    if noise.enabled and noise.height_offset > 0:
+        o = noise.height_offset
+        out["height_offset"] = jax.random.uniform(jax.random.fold_in(rng, 3), (), minval=-o,
+                                                  maxval=o)
+    if noise.enabled and noise.height_missing_per_episode and missing(noise):
+        out["missing_scale"] = jax.random.uniform(jax.random.fold_in(rng, 5), ())
+    return out
 
 
 def body_cells(hm: HeightMapConfig) -> np.ndarray:
@@ -77,6 +81,8 @@ def corrupt(obs: dict[str, jnp.ndarray], info: dict, rng: jax.Array | None,
         heights = heights + info["height_offset"]
     if missing(noise):
         p = missing_chance(obs["privileged_state"][n:], hm, noise)
+        if "missing_scale" in info:
+            p = p * info["missing_scale"]
         hole = jax.random.uniform(jax.random.fold_in(rng, 11), p.shape) < p
         heights = jnp.where(hole, hm.clip, heights)
     return {**obs, "state": jnp.concatenate([obs["state"][:n], heights])}

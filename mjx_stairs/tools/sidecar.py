@@ -110,9 +110,10 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         "pushes": None if not (r.enabled and r.push_interval_s > 0) else {
             "interval_s": r.push_interval_s, "velocity_m_s": r.push_velocity,
             "on_stairs_only": r.push_on_stairs},
-        "height_map": {"offset_m": n.height_offset, "missing": n.height_missing,
-                       "missing_under_body": n.height_missing_body,
-                       "missing_at_edges": n.height_missing_edge} if n.enabled else None,
+        "height_map": None if not n.enabled else {
+            "offset_m": n.height_offset, "missing": n.height_missing,
+            "missing_under_body": n.height_missing_body, "missing_at_edges": n.height_missing_edge,
+            "missing_scaled_per_episode": n.height_missing_per_episode},
         "route": None if route.perturb_prob <= 0 else {
             "perturb_prob": route.perturb_prob, "lateral_fraction_of_width": route.lateral,
             "corner_cut_m": route.corner_cut_m, "coarse_points": list(route.coarse_points)},

@@ -178,3 +178,22 @@ def test_missing_cells_come_at_their_rate_and_not_without_noise():
     off = dataclasses.replace(noise, enabled=False)
     assert perception.corrupt(obs, {}, jax.random.PRNGKey(0), EnvConfig(noise=off)) is obs
     assert perception.corrupt(obs, {}, jax.random.PRNGKey(0), EnvConfig()) is obs  # defaults
+
+
+def test_missing_cells_scale_with_the_episode_draw():
+    """height_missing_per_episode: each episode draws a scale in [0, 1] of the chances, so a
+    complete map (scale near 0) is as usual in training as a holey one."""
+    noise = dataclasses.replace(QUIET, height_missing=0.5, height_missing_per_episode=True)
+    cfg = EnvConfig(noise=noise)
+    scales = [float(perception.draw(jax.random.PRNGKey(s), cfg)["missing_scale"])
+              for s in range(200)]
+    assert 0.0 <= min(scales) < 0.05 and 0.95 < max(scales) <= 1.0
+    assert 0.45 < np.mean(scales) < 0.55
+    assert not np.any(_corrupt(noise, _obs(), {"missing_scale": jnp.float32(0.0)}) == 3.0)
+    full = np.mean([_corrupt(noise, _obs(), {"missing_scale": jnp.float32(1.0)}, seed=s) == 3.0
+                    for s in range(20)])
+    half = np.mean([_corrupt(noise, _obs(), {"missing_scale": jnp.float32(0.5)}, seed=s) == 3.0
+                    for s in range(20)])
+    assert 0.45 < full < 0.55 and 0.21 < half < 0.29
+    fixed = dataclasses.replace(noise, height_missing_per_episode=False)
+    assert "missing_scale" not in perception.draw(jax.random.PRNGKey(0), EnvConfig(noise=fixed))
