@@ -209,8 +209,7 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
         if main:
             logger.truncate_jsonl(run_dir / "metrics.jsonl", int(meta["iteration"]))
             if not (run_dir / "config.json").exists():  # resumed into a new run dir
-                atomic.write_text(run_dir / "config.json",
-                                  json.dumps(config_dict(config), indent=2))
+                _write_config(run_dir, config)
         _say(f"resumed {path} at iteration {meta['iteration']}")
         return state
     state = trainer.init(jax.random.PRNGKey(config.train.seed))
@@ -219,8 +218,13 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
         state = start_from_policy(state, init_from, trainer)
         _say(f"initialised params and normaliser from {init_from}")
     if main:
-        atomic.write_text(run_dir / "config.json", json.dumps(config_dict(config), indent=2))
+        _write_config(run_dir, config)
     return state
+
+
+def _write_config(run_dir: Path, config) -> None:
+    """The run's config.json (the whole config as JSON), written atomically."""
+    atomic.write_text(run_dir / "config.json", json.dumps(config_dict(config), indent=2))
 
 
 def _logger(run_dir: Path, tc, steps_per_iter: int, iteration: int, target: int):
