@@ -69,6 +69,23 @@ def _check_route(pts: np.ndarray, where: str) -> np.ndarray:
     return pts[keep]
 
 
+def offset_route(route, distance: float) -> np.ndarray:
+    """The polyline ``route`` [m, 2] shifted sideways by ``distance`` m (+: left of the direction
+    of travel), as a route a building map draws off the centre-line: each corner moves along the
+    bisector of its two segments' normals, as far as keeps both segments ``distance`` away (a
+    mitre, capped at 5x for near-reversals)."""
+    pts = _check_route(np.asarray(route, np.float64).reshape(-1, 2), "offset_route")
+    d = np.diff(pts, axis=0)
+    d /= np.hypot(*d.T)[:, None]
+    n = np.stack([-d[:, 1], d[:, 0]], 1)  # the left normal of each segment
+    before, after = np.concatenate([n[:1], n]), np.concatenate([n, n[-1:]])
+    bis = before + after
+    size = np.linalg.norm(bis, axis=1, keepdims=True)
+    bis = np.where(size > 1e-9, bis / np.maximum(size, 1e-12), after)
+    cos = np.maximum(np.einsum("ij,ij->i", bis, after), 0.2)
+    return pts + bis * (distance / cos)[:, None]
+
+
 def route_line(route: np.ndarray, heights: np.ndarray, resolution: float) -> np.ndarray:
     """[K, 3] centre-line of the polyline ``route`` [m, 2] (tile frame): its corners kept where
     it has at most K - 1 segments, else K points evenly along it; z from the heights."""

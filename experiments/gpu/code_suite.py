@@ -10,11 +10,15 @@ stairs, every shape up and down, one atlas, 1000 robots per case), and `eval --m
 Steps, each writing JSON under OUT as soon as it is complete and skipped when its file exists
 (so a command cut short is continued by running it again):
   suite  every policy on the code suite: OUT/code_<policy>.json (one record per case)
-  mesh   U-shaped test level 3 (left) exported to STL, then for stage2_u and stage2_u_lean:
-         eval --family u_shaped --levels 3 (the same starts, left and right tiles;
-         OUT/u3_family_<policy>.json), eval --mesh with the importer's route
-         (OUT/u3_mesh_<policy>.json) and eval --suite of the exported case, whose JSON carries
-         the procedural route and spawn area (OUT/u3_case_<policy>.json)
+  mesh   U-shaped test level 3 (left) and the code suite's commercial U (left, up and down)
+         exported to STL (OUT/u3/), then for each of --mesh-policies: eval --family u_shaped
+         --levels 3 (the same starts, left and right tiles; OUT/u3_family_<policy>.json);
+         eval --mesh of every export with the importer's route, and of U level 3 with that
+         route shifted a third of the stair's width to the left and to the right
+         (terrains.cases.offset_route; OUT/u3_mesh_<policy>.json, one record per case); eval
+         --suite of the exported cases, whose JSON carry the procedural route and spawn area
+         (OUT/u3_case_<policy>.json). Files written by an earlier version with U level 3 only
+         are kept (the step is skipped where the file exists).
   alone  stage2_u on four code cases one at a time (OUT/code_alone_stage2_u.json), to compare
          with the same cases in code_stage2_u.json
   table  (no GPU) OUT/code_suite.md from the files present: success / falls per case and policy,
@@ -38,8 +42,11 @@ POLICIES = {  # the committed policies the README cites
     "straight_lean": RESULTS / "transfer_lean/straight/policy.npz",
     "l_shaped_lean": RESULTS / "transfer_lean/l_shaped/policy.npz",
     "spiral_lean": RESULTS / "transfer_lean/spiral/policy.npz",
+    "generalist": RESULTS / "generalist/policy.npz",
 }
-MESH_POLICIES = ("stage2_u", "stage2_u_lean")
+MESH_POLICIES = ("stage2_u", "stage2_u_lean")  # the default of --mesh-policies
+CODE_EXPORTS = ("code_commercial_u_left_up", "code_commercial_u_left_down")
+OFFSET = 1.0 / 3.0  # of the stair's clear width
 ALONE = ("code_commercial_straight_up", "code_commercial_u_left_down",
          "code_residential_spiral_ccw_up", "code_residential_winder_left_down")
 EVAL_PHYSICS: tuple[str, ...] = ()  # none: the evaluation physics preset (specs.EVAL_PHYSICS)
@@ -93,45 +100,70 @@ def run_alone(out: Path, spec) -> None:
 
 
 def export_u3(out: Path, resolution: float) -> Path:
-    """U-shaped test level 3 (left) as OUT/u3/u3.stl + u3.json (the procedural route)."""
+    """U-shaped test level 3 (left) as OUT/u3/u3.stl + u3.json (the procedural route), and the
+    code suite's CODE_EXPORTS beside it."""
     import terrains
+    from mjx_stairs.study import cases
     from terrains.suites import write_case
 
     folder = out / "u3"
     if not (folder / "u3.json").exists():
         tile = terrains.make_tile("u_shaped", 2, "left", "test", resolution)
         write_case(tile, folder, "u3")
+    if not all((folder / f"{n}.json").exists() for n in CODE_EXPORTS):
+        code = dict(cases.suite_cases("code", resolution))
+        for name in CODE_EXPORTS:
+            write_case(code[name], folder, name)
     return folder
 
 
-def run_mesh(out: Path, spec) -> None:
-    """The family (evaluate.success_by_cell: the starts of eval --family), the mesh and the
-    case, each one program for both policies."""
+def mesh_routes(folder: Path, resolution: float) -> list:
+    """eval --mesh's cases: every export with the importer's route (named as the export), and
+    U level 3 with its procedural route shifted OFFSET of the width left and right."""
+    from terrains.cases import mesh_tile, offset_route
+
+    found = []
+    for name in ("u3", *CODE_EXPORTS):
+        rec = json.loads((folder / f"{name}.json").read_text())
+        tile = mesh_tile(folder / rec["mesh"], rec["start"][:2], rec["goal"][:2], None,
+                         resolution)
+        found.append((name, tile))
+    rec = json.loads((folder / "u3.json").read_text())
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        route = offset_route(rec["route"], sign * OFFSET * rec["spec"]["width"])
+        found.append((f"u3_offset_{side}", mesh_tile(folder / rec["mesh"], rec["start"][:2],
+                                                     rec["goal"][:2], route, resolution)))
+    return found
+
+
+def run_mesh(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
+    """The family (evaluate.success_by_cell: the starts of eval --family), the meshes and the
+    cases, each one program for every policy."""
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study import cases, evaluate
 
     folder = export_u3(out, spec.resolution)
-    rec = json.loads((folder / "u3.json").read_text())
-    policies = {n: load_policy(POLICIES[n]) for n in MESH_POLICIES}
-    if not all((out / f"u3_family_{n}.json").exists() for n in policies):
+    policies = {n: load_policy(POLICIES[n]) for n in names}
+    todo = {n: p for n, p in policies.items() if not (out / f"u3_family_{n}.json").exists()}
+    if todo:
         t0 = time.time()
         cell = evaluate.CellSpec(cells=(("u_shaped", "test", 2),),
                                  robots_per_cell=spec.robots_per_level,
                                  episode_length_s=spec.episode_length_s, seed=spec.seed,
                                  resolution=spec.resolution, physics=spec.physics,
                                  env_overrides=spec.env_overrides)
-        for name, r in evaluate.success_by_cell(policies, cell).items():
+        for name, r in evaluate.success_by_cell(todo, cell).items():
             print(f"{name} eval --family u_shaped --levels 3: {100 * r['success'][0]:.1f} %")
             write(out / f"u3_family_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
                                                          result=r))
-    found = {"mesh": lambda: cases.mesh_cases(folder / "u3.stl", rec["start"][:2],
-                                              rec["goal"][:2], None, spec.resolution),
+    found = {"mesh": lambda: mesh_routes(folder, spec.resolution),
              "case": lambda: cases.suite_cases(str(folder), spec.resolution)}
     for kind, make in found.items():
-        if all((out / f"u3_{kind}_{n}.json").exists() for n in policies):
+        todo = {n: p for n, p in policies.items() if not (out / f"u3_{kind}_{n}.json").exists()}
+        if not todo:
             continue
         t0 = time.time()
-        for name, recs in cases.success_by_case(policies, make(), spec).items():
+        for name, recs in cases.success_by_case(todo, make(), spec).items():
             print(f"{name} eval --{'mesh' if kind == 'mesh' else 'suite'} u3\n"
                   + cases.case_table(recs), flush=True)
             write(out / f"u3_{kind}_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
@@ -155,19 +187,7 @@ def write_table(out: Path) -> None:
             cells = [f"{100 * r['results'][i]['success']:.1f} / {100 * r['results'][i]['fell']:.1f}"
                      for r in runs.values()]
             lines.append(f"| {rec['name']} | " + " | ".join(cells) + " |")
-    u3 = []
-    for name in MESH_POLICIES:
-        got = {k: out / f"u3_{k}_{name}.json" for k in ("family", "mesh", "case")}
-        if all(p.exists() for p in got.values()):
-            fam = json.loads(got["family"].read_text())["result"]  # a cell record
-            m, c = (json.loads(got[k].read_text())["results"][0] for k in ("mesh", "case"))
-            u3.append(f"| {name} | {100 * fam['success'][0]:.1f} | {100 * m['success']:.1f} | "
-                      f"{100 * c['success']:.1f} |")
-    if u3:
-        lines += ["", "U-shaped test level 3, success in %: eval --family (left and right), "
-                  "eval --mesh of the exported left tile (importer's route), eval --suite of it "
-                  "(procedural route and spawn)", "", "| policy | family | mesh | case |",
-                  "|---|---|---|---|", *u3]
+    lines += mesh_table(out, runs)
     alone = out / "code_alone_stage2_u.json"
     if alone.exists() and "stage2_u" in runs:
         together = {r["name"]: r for r in runs["stage2_u"]["results"]}
@@ -181,11 +201,47 @@ def write_table(out: Path) -> None:
     print("\n".join(lines), flush=True)
 
 
+def mesh_table(out: Path, runs: dict) -> list[str]:
+    """U level 3 (family, mesh, case, offset routes) and the exported code cases (suite, mesh,
+    case) per policy with a u3_family file; '-' where an older file lacks a case."""
+    u3, code = [], []
+    for path in sorted(out.glob("u3_family_*.json")):
+        name = path.stem[len("u3_family_"):]
+        got = {k: out / f"u3_{k}_{name}.json" for k in ("mesh", "case")}
+        if not all(p.exists() for p in got.values()):
+            continue
+        fam = json.loads(path.read_text())["result"]  # a cell record
+        m, c = ({r["name"]: r for r in json.loads(got[k].read_text())["results"]}
+                for k in ("mesh", "case"))
+        suite = {r["name"]: r for r in runs.get(name, {}).get("results", [])}
+
+        def pct(recs: dict, key: str) -> str:
+            return f"{100 * recs[key]['success']:.1f}" if key in recs else "-"
+        u3.append(f"| {name} | {100 * fam['success'][0]:.1f} | {pct(m, 'u3')} | {pct(c, 'u3')} "
+                  f"| {pct(m, 'u3_offset_left')} | {pct(m, 'u3_offset_right')} |")
+        code += [f"| {name} | {case} | {pct(suite, case)} | {pct(m, case)} | {pct(c, case)} |"
+                 for case in CODE_EXPORTS if case in m]
+    lines = []
+    if u3:
+        lines += ["", "U-shaped test level 3, success in %: eval --family (left and right tiles), "
+                  "eval --mesh of the exported left tile (importer's route), eval --suite of it "
+                  "(procedural route and spawn), eval --mesh with the procedural route shifted a "
+                  "third of the width left / right", "",
+                  "| policy | family | mesh | case | offset left | offset right |",
+                  "|---|---|---|---|---|---|", *u3]
+    if code:
+        lines += ["", "Code-suite staircases exported to STL, success in %: in the suite's atlas, "
+                  "eval --mesh (importer's route), eval --suite of the export", "",
+                  "| policy | case | suite | mesh | case alone |", "|---|---|---|---|---|", *code]
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--steps", default="suite,mesh,alone,table")
     ap.add_argument("--policies", default=",".join(POLICIES), help="for the suite step")
+    ap.add_argument("--mesh-policies", default=",".join(MESH_POLICIES), help="for the mesh step")
     ap.add_argument("--robots", type=int, default=1000, help="robots per case")
     ap.add_argument("--episode-s", type=float, default=30.0)
     ap.add_argument("--resolution", type=float, default=0.025)
@@ -199,13 +255,14 @@ def main() -> None:
                     resolution=a.resolution, env_overrides=tuple(a.env))
     a.out.mkdir(parents=True, exist_ok=True)
     names = [n for n in a.policies.split(",") if n]
-    missing = [n for n in names if n not in POLICIES or not POLICIES[n].exists()]
+    mesh_names = tuple(n for n in a.mesh_policies.split(",") if n)
+    missing = [n for n in (*names, *mesh_names) if n not in POLICIES or not POLICIES[n].exists()]
     if missing:
         raise SystemExit(f"code_suite: no committed policy for {', '.join(missing)}")
     steps = a.steps.split(",")
     t0 = time.time()
     for step, fn in (("suite", lambda: run_suite(a.out, names, spec)),
-                     ("mesh", lambda: run_mesh(a.out, spec)),
+                     ("mesh", lambda: run_mesh(a.out, spec, mesh_names)),
                      ("alone", lambda: run_alone(a.out, spec)),
                      ("table", lambda: write_table(a.out))):
         if step in steps:

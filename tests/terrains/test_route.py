@@ -120,3 +120,21 @@ def test_bad_inputs_one_line_errors(tmp_path):
     with pytest.raises(ValueError, match="mm.stl: .*looks like millimetres") as e:
         import_mesh(tmp_path / "mm.stl", t.spawn[:2] * 1000, t.goal[:2] * 1000)
     _one_line(e)
+
+
+def test_offset_route_keeps_every_segment_at_the_distance():
+    """A U-turn (two 90-degree corners) shifted 0.5 m left and right: every segment of the
+    shifted polyline runs parallel to its original at 0.5 m, on the asked side."""
+    from terrains.cases import offset_route
+
+    u = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 2.0], [0.0, 2.0]])
+    for dist in (0.5, -0.5):
+        off = offset_route(u, dist)
+        for a, b, p, q in zip(u[:-1], u[1:], off[:-1], off[1:], strict=True):
+            t = (b - a) / np.hypot(*(b - a))
+            left = np.array([-t[1], t[0]])
+            assert abs(t[0] * (q - p)[1] - t[1] * (q - p)[0]) < 1e-9  # parallel
+            assert np.allclose([(p - a) @ left, (q - b) @ left], dist)  # at the distance
+    assert np.allclose(offset_route(u, 0.5)[1], [3.5, 0.5])  # inside the turn: a mitre
+    with pytest.raises(ValueError, match="at least 2"):
+        offset_route([[1.0, 1.0]], 0.3)
