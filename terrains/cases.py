@@ -69,21 +69,26 @@ def _check_route(pts: np.ndarray, where: str) -> np.ndarray:
     return pts[keep]
 
 
-def offset_route(route, distance: float) -> np.ndarray:
+def offset_route(route, distance: float, taper_m: float = 0.0) -> np.ndarray:
     """The polyline ``route`` [m, 2] shifted sideways by ``distance`` m (+: left of the direction
     of travel), as a route a building map draws off the centre-line: each corner moves along the
     bisector of its two segments' normals, as far as keeps both segments ``distance`` away (a
-    mitre, capped at 5x for near-reversals)."""
+    mitre, capped at 5x for near-reversals). ``taper_m`` > 0: the shift fades linearly to none
+    over the route's last ``taper_m`` m, so that it still ends on its goal (as the training
+    routes of mjx_stairs.env.routes do)."""
     pts = _check_route(np.asarray(route, np.float64).reshape(-1, 2), "offset_route")
     d = np.diff(pts, axis=0)
-    d /= np.hypot(*d.T)[:, None]
+    seg = np.hypot(*d.T)
+    d /= seg[:, None]
     n = np.stack([-d[:, 1], d[:, 0]], 1)  # the left normal of each segment
     before, after = np.concatenate([n[:1], n]), np.concatenate([n, n[-1:]])
     bis = before + after
     size = np.linalg.norm(bis, axis=1, keepdims=True)
     bis = np.where(size > 1e-9, bis / np.maximum(size, 1e-12), after)
     cos = np.maximum(np.einsum("ij,ij->i", bis, after), 0.2)
-    return pts + bis * (distance / cos)[:, None]
+    to_end = np.r_[np.cumsum(seg[::-1])[::-1], 0.0]
+    fade = np.clip(to_end / taper_m, 0.0, 1.0) if taper_m > 0 else np.ones(len(pts))
+    return pts + bis * (distance * fade / cos)[:, None]
 
 
 def route_line(route: np.ndarray, heights: np.ndarray, resolution: float) -> np.ndarray:

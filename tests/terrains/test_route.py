@@ -136,5 +136,8 @@ def test_offset_route_keeps_every_segment_at_the_distance():
             assert abs(t[0] * (q - p)[1] - t[1] * (q - p)[0]) < 1e-9  # parallel
             assert np.allclose([(p - a) @ left, (q - b) @ left], dist)  # at the distance
     assert np.allclose(offset_route(u, 0.5)[1], [3.5, 0.5])  # inside the turn: a mitre
+    line = np.stack([np.linspace(0.0, 4.0, 9), np.zeros(9)], 1)
+    tapered = offset_route(line, 0.6, taper_m=1.0)  # ends on the route's end, as in training
+    assert np.allclose(tapered[:, 1], [0.6] * 7 + [0.3, 0.0]) and np.allclose(tapered[-1], line[-1])
     with pytest.raises(ValueError, match="at least 2"):
         offset_route([[1.0, 1.0]], 0.3)
