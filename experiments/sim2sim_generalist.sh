@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # Issue 25: the generalist (experiments/results/generalist/policy.onnx) in CPU MuJoCo through
 # `mjx-stairs sim2sim`, one cell at a time (one process; the 2-core development machine).
-# Cells: U-shaped test levels, down 1-6 and up 1, 3, 5; then (LATENCY=1) down 1-6 with 20 ms of
-# action latency. One JSON per cell under experiments/results/sim2sim/generalist[_latency20]/,
-# skipped when already there. N episodes per cell (default 50), seed 0, 20 s episodes, default
-# robot (go2_full.xml, joint damping 2).
+# Cells: U-shaped test levels, down 1-6 and up 1-6; with LATENCY=1 the same 12 cells with 20 ms
+# of action latency. One JSON per cell under experiments/results/sim2sim/generalist[_latency20]/,
+# skipped when already there; then the folder's table.md (experiments/sim2sim_generalist_table.py).
+# N episodes per cell (default 50), seed 0, 20 s episodes, default robot (go2_full.xml, joint
+# damping 2). LEVELS="1 3 5" restricts the levels (default 1-6).
+# The first generalist run's cells (its policy now generalist/first_run/policy.onnx) are under
+# experiments/results/sim2sim/generalist_first_run*/, made by this script's earlier version
+# (git show 5810c2a:experiments/sim2sim_generalist.sh).
 set -u
-N=${N:-50}; ONNX=experiments/results/generalist/policy.onnx
+N=${N:-50}; ONNX=experiments/results/generalist/policy.onnx; LEVELS=${LEVELS:-1 2 3 4 5 6}
 cell() {  # dir direction level extra...
   local d=$1 dir=$2 lv=$3; shift 3
   local f=experiments/results/sim2sim/$d/u_shaped_test_${dir}_L${lv}.json
@@ -17,8 +21,12 @@ cell() {  # dir direction level extra...
   echo "$d $dir L$lv: $(( $(date +%s) - t0 )) s wall"
 }
 if [ "${LATENCY:-0}" = 1 ]; then
-  for lv in 1 2 3 4 5 6; do cell generalist_latency20 down $lv --latency-ms 20; done
+  d=generalist_latency20; extra=(--latency-ms 20); how="with LATENCY=1 "
 else
-  for lv in 1 2 3 4 5 6; do cell generalist down $lv; done
-  for lv in 1 3 5; do cell generalist up $lv; done
+  d=generalist; extra=(); how=""
 fi
+for dir in down up; do
+  for lv in $LEVELS; do cell $d $dir $lv "${extra[@]}"; done
+done
+python experiments/sim2sim_generalist_table.py experiments/results/sim2sim/$d \
+  --note "Policy: $ONNX. Made by experiments/sim2sim_generalist.sh $how(N=$N)."
