@@ -25,10 +25,11 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from diagnose_episodes import first_episodes  # experiments/, the script's folder
 
 from mjx_stairs.env import rewards as rw
 from mjx_stairs.env.geometry import base_kinematics, wrap_angle
-from mjx_stairs.rl.policy import load_policy, policy_action
+from mjx_stairs.rl.policy import load_policy
 from mjx_stairs.sim import robot as rb
 from mjx_stairs.study import evaluate
 from mjx_stairs.study.cases import case_atlas, case_states, suite_cases
@@ -103,32 +104,14 @@ def rollout(env, policy, state):
             "success": st.info["success"],
         }
 
-    def body(carry, _):
-        st, finished, last = carry
-        st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
-        now = jax.vmap(measure)(st)
-        done = st.done > 0
-        first = done & ~finished
-        keep = lambda new, old: jnp.where(  # noqa: E731
-            (done | finished).reshape(done.shape + (1,) * (new.ndim - 1)), old, new)
-        rec = {k: keep(v, last[k]) for k, v in now.items()}
-        rec["success"] = jnp.where(first, st.metrics["episode_success"], rec["success"])
-        for k in ENDINGS + ("terminated",):
-            rec[k] = jnp.where(first, st.metrics[k], last[k])
-        # the ending step's own attitude (the state above is the next episode's)
-        g = st.info["final_obs"]["privileged_state"][:, 6:9]
-        p, r = pitch_roll(g)
-        rec["end_pitch"] = jnp.where(first, p, last["end_pitch"])
-        rec["end_roll"] = jnp.where(first, r, last["end_roll"])
-        rec["running"] = ~(done | finished)
-        return (st, finished | done, rec), rec
+    def at_end(st):
+        """The ending step's success, endings and attitude (its state is the next episode's)."""
+        pitch, roll = pitch_roll(st.info["final_obs"]["privileged_state"][:, 6:9])
+        return {"success": st.metrics["episode_success"],
+                **{k: st.metrics[k] for k in ENDINGS + ("terminated",)},
+                "end_pitch": pitch, "end_roll": roll}
 
-    init = jax.vmap(measure)(state)
-    for k in ENDINGS + ("terminated", "end_pitch", "end_roll"):
-        init[k] = jnp.zeros_like(init["arc"])
-    init["running"] = jnp.ones_like(init["arc"], bool)
-    zeros = jnp.zeros(state.done.shape, bool)
-    return jax.lax.scan(body, (state, zeros, init), None, length=env.episode_steps)[1]
+    return first_episodes(env, policy, state, measure, at_end)
 
 
 def robot_records(env, rec, names, specs, robots, spawn_arc, spawn_z):

@@ -59,23 +59,35 @@ def rollout(env, policy, state):
             "success": st.info["success"],
         }
 
+    def at_end(st):
+        return {"success": st.metrics["episode_success"], "fell": st.metrics["terminated"]}
+
+    return first_episodes(env, policy, state, measure, at_end)
+
+
+def first_episodes(env, policy, state, measure, at_end):
+    """Per step [T, B, ...] records of each robot's first episode: ``measure(state)`` (one
+    robot) frozen at its last values once the episode ended (a done step's state is already
+    the next episode's), ``at_end(states)`` ([B] values, e.g. the metrics that hold the
+    endings) taken on the ending step and kept, and "running" (bool)."""
+
     def body(carry, _):
         st, finished, last = carry
         st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
         now = jax.vmap(measure)(st)
         done = st.done > 0
-        first = done & ~finished
-        # a done step's state is the next episode's: keep the last values of the ended one,
-        # except the endings, which the metrics hold
-        rec = {k: jnp.where(done | finished, last[k], v) for k, v in now.items()}
-        rec["success"] = jnp.where(first, st.metrics["episode_success"], rec["success"])
-        rec["fell"] = jnp.where(first, st.metrics["terminated"], last["fell"])
-        rec["running"] = (~(done | finished)).astype(jnp.float32)
-        return (st, finished | done, rec), rec
+        first, ended = done & ~finished, done | finished
+        rec = {k: jnp.where(ended.reshape(ended.shape + (1,) * (v.ndim - 1)), last[k], v)
+               for k, v in now.items()}
+        for k, v in at_end(st).items():
+            rec[k] = jnp.where(first, v, rec.get(k, last[k]))
+        rec["running"] = ~ended
+        return (st, ended, rec), rec
 
     init = jax.vmap(measure)(state)
-    init["fell"] = jnp.zeros_like(init["z"])
-    init["running"] = jnp.ones_like(init["z"])
+    ends = jax.eval_shape(at_end, state)
+    init.update({k: jnp.zeros(v.shape, v.dtype) for k, v in ends.items() if k not in init})
+    init["running"] = jnp.ones(state.done.shape, bool)
     zeros = jnp.zeros(state.done.shape, bool)
     return jax.lax.scan(body, (state, zeros, init), None, length=env.episode_steps)[1]
 
@@ -83,7 +95,7 @@ def rollout(env, policy, state):
 def summarise(env, levels, rec, robots, spawn_arc):
     """Per-robot and per-level dicts from the [T, B] records."""
     dt = env.dt
-    t_end = rec["running"].sum(0) * dt  # episode length per robot
+    t_end = rec["running"].astype(np.float32).sum(0) * dt  # episode length per robot
     tiles = np.asarray(rec["tile"])
     line_len = np.asarray(env.tiles.line_len)[tiles]
     robots_out, levels_out = [], []

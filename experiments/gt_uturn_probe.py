@@ -57,25 +57,15 @@ def gt_run(policy, spec, start=None, steps=None, solver=bw.DEFAULT_SOLVER):
     batch = bw.Batch(models, np.asarray(q0, np.float64),
                      None if v0 is None else np.asarray(v0, np.float64), nthread=1)
     goal = np.asarray(env.goals)[tiles]
-    control = gt._Controller(env, policy, info)
-    c = env.config
-    ep = gt._Episodes(B, max(1, int(round(c.success_hold_s / env.dt))))
-    last = np.asarray(a0, np.float32)
     qs, vs, acts = [batch.qpos.copy()], [batch.qvel.copy()], []
-    for k in range(steps or env.episode_steps):
-        active = ep.active
-        a, target = control(batch.qpos, batch.qvel, last)
-        batch.step(target, c.decimation, active)
-        last = np.where(active[:, None], a, last)
-        close, fell = gt._endings(env, batch.qpos, batch.qvel, goal)
-        ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)
-        done_now = active & (ep.count >= ep.hold_steps)
-        ep.time_to_goal[done_now] = (k + 1) * env.dt
-        ep.success |= done_now
-        ep.fell |= active & ~done_now & fell
-        qs.append(batch.qpos.copy())
-        vs.append(batch.qvel.copy())
+
+    def record(b, last):
+        qs.append(b.qpos.copy())
+        vs.append(b.qvel.copy())
         acts.append(last.copy())
+
+    ep = gt.closed_loop(env, policy, info, batch, goal, np.asarray(a0, np.float32),
+                        steps or env.episode_steps, record)
     batch.close()
     return dict(qpos=np.array(qs), qvel=np.array(vs), action=np.array(acts), success=ep.success,
                 fell=ep.fell, t_goal=ep.time_to_goal, tiles=tiles, goal=goal, dt=env.dt)

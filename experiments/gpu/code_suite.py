@@ -48,9 +48,9 @@ POLICIES = {  # the committed policies the README cites
 MESH_POLICIES = ("stage2_u", "stage2_u_lean")  # the default of --mesh-policies
 CODE_EXPORTS = ("code_commercial_u_left_up", "code_commercial_u_left_down")
 OFFSET = 1.0 / 3.0  # of the stair's clear width
-TAPER_M = 1.0  # the shift fades over the route's last metre: a route ends on its goal, as the
-# training routes do (mjx_stairs.env.routes.TAPER_M). Without it (first run, H100,
-# 2026-11-24) the robots stopped at the route's end 0.67 m beside the goal: 44-49 % time-outs
+# The shift fades over the route's last metre (mjx_stairs.env.routes.TAPER_M, as training's
+# routes): a route ends on its goal. Without it (first run, H100, 2026-11-24) the robots stopped
+# at the route's end 0.67 m beside the goal: 44-49 % time-outs.
 ALONE = ("code_commercial_straight_up", "code_commercial_u_left_down",
          "code_residential_spiral_ccw_up", "code_residential_winder_left_down")
 EVAL_PHYSICS: tuple[str, ...] = ()  # none: the evaluation physics preset (specs.EVAL_PHYSICS)
@@ -124,19 +124,19 @@ def export_u3(out: Path, resolution: float) -> Path:
 def mesh_routes(folder: Path, resolution: float) -> list:
     """eval --mesh's cases: every export with the importer's route (named as the export), and
     U level 3 with its procedural route shifted OFFSET of the width left and right."""
+    from mjx_stairs.env.routes import TAPER_M
+    from mjx_stairs.study.cases import mesh_cases
     from terrains.cases import mesh_tile, offset_route
 
-    found = []
-    for name in ("u3", *CODE_EXPORTS):
-        rec = json.loads((folder / f"{name}.json").read_text())
-        tile = mesh_tile(folder / rec["mesh"], rec["start"][:2], rec["goal"][:2], None,
-                         resolution)
-        found.append((name, tile))
-    rec = json.loads((folder / "u3.json").read_text())
+    recs = {n: json.loads((folder / f"{n}.json").read_text()) for n in ("u3", *CODE_EXPORTS)}
+    found = [case for rec in recs.values()
+             for case in mesh_cases(folder / rec["mesh"], rec["start"][:2], rec["goal"][:2],
+                                    None, resolution)]
+    u3 = recs["u3"]
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        route = offset_route(rec["route"], sign * OFFSET * rec["spec"]["width"], TAPER_M)
-        found.append((f"u3_offset_{side}", mesh_tile(folder / rec["mesh"], rec["start"][:2],
-                                                     rec["goal"][:2], route, resolution)))
+        route = offset_route(u3["route"], sign * OFFSET * u3["spec"]["width"], TAPER_M)
+        found.append((f"u3_offset_{side}", mesh_tile(folder / u3["mesh"], u3["start"][:2],
+                                                     u3["goal"][:2], route, resolution)))
     return found
 
 

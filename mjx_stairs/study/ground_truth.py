@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, NamedTuple, Sequence
+from typing import Any, Callable, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -136,6 +136,33 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
     return close, tilted | too_low | outside | bad
 
 
+def closed_loop(env: envlib.StairEnv, policy: Policy, info: dict, batch: bw.Batch,
+                goal: np.ndarray, last_action: np.ndarray, steps: int,
+                record: Callable[[bw.Batch, np.ndarray], None] | None = None) -> _Episodes:
+    """The policy closed-loop on `batch` for up to `steps` policy steps by the evaluation's rules
+    (goal [B, 4]; a robot stops once it has succeeded or fallen). `record(batch, last_action)`
+    after every step; without it the loop ends as soon as every robot has stopped."""
+    control = _Controller(env, policy, info)
+    c = env.config
+    ep = _Episodes(batch.qpos.shape[0], max(1, int(round(c.success_hold_s / env.dt))))
+    for k in range(steps):
+        active = ep.active
+        if record is None and not active.any():
+            break
+        a, target = control(batch.qpos, batch.qvel, last_action)
+        batch.step(target, c.decimation, active)
+        last_action = np.where(active[:, None], a, last_action)
+        close, fell = _endings(env, batch.qpos, batch.qvel, goal)
+        ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)
+        done_now = active & (ep.count >= ep.hold_steps)
+        ep.time_to_goal[done_now] = (k + 1) * env.dt
+        ep.success |= done_now
+        ep.fell |= active & ~done_now & fell
+        if record is not None:
+            record(batch, last_action)
+    return ep
+
+
 def success_in_ground_truth(
     policy: Policy, spec: CellSpec, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
     nthread: int | None = None, terrain: str = "boxes",
@@ -148,25 +175,9 @@ def success_in_ground_truth(
     env, state, info, tiles, models = _start(policy, spec, solver, terrain)
     B = tiles.shape[0]
     batch = bw.Batch(models, np.asarray(state.pipeline_state.qpos), nthread=nthread)
-    goal = np.asarray(env.goals)[tiles]
-    control = _Controller(env, policy, info)
-    c = env.config
-    ep = _Episodes(B, max(1, int(round(c.success_hold_s / env.dt))))
-    last_action = np.zeros((B, 12), np.float32)
     t0 = time.time()
-    for k in range(env.episode_steps):
-        active = ep.active
-        if not active.any():
-            break
-        a, target = control(batch.qpos, batch.qvel, last_action)
-        batch.step(target, c.decimation, active)
-        last_action = np.where(active[:, None], a, last_action)
-        close, fell = _endings(env, batch.qpos, batch.qvel, goal)
-        ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)
-        done_now = active & (ep.count >= ep.hold_steps)
-        ep.time_to_goal[done_now] = (k + 1) * env.dt
-        ep.success |= done_now
-        ep.fell |= active & ~done_now & fell
+    ep = closed_loop(env, policy, info, batch, np.asarray(env.goals)[tiles],
+                     np.zeros((B, 12), np.float32), env.episode_steps)
     batch.close()
     per_cell = ep.time_to_goal.reshape(len(spec.cells), -1)
     return cell_records(
