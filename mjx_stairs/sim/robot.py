@@ -14,6 +14,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Literal
 
+import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
@@ -258,9 +259,12 @@ def robot_ids(model: mujoco.MjModel) -> RobotIds:
 def build(
     heights: np.ndarray | None, resolution: float, config: RobotConfig = RobotConfig()
 ) -> Robot:
-    """Build the MuJoCo model with the terrain and put it on the default device."""
+    """Build the MuJoCo model with the terrain and put it on this process's first device (MJX's
+    default, ``jax.devices()[0]``, is process 0's device in a multi-process run, which the
+    other processes cannot address)."""
     mj_model = build_mj_model(heights, resolution, config)
-    return Robot(mj_model, mjx.put_model(mj_model), robot_ids(mj_model), config)
+    mx = mjx.put_model(mj_model, device=jax.local_devices()[0])
+    return Robot(mj_model, mx, robot_ids(mj_model), config)
 
 
 def pd_torque(

@@ -6,7 +6,8 @@ trains the toy task (16 robots with a 5 x 5 map, 2 iterations of one chunk each,
 after each) into ``OUT_DIR/run``, then, given a STATE_FILE, resumes from it into
 ``OUT_DIR/resumed``. With MJX_STAIRS_COORDINATOR / _NUM_PROCESSES / _PROCESS_ID set it is one of
 several processes (rl.distributed); XLA_FLAGS decides its devices. Each process writes
-``OUT_DIR/process_<i>.json``: its view of the devices and every chunk's record.
+``OUT_DIR/process_<i>.json``: its view of the devices, every chunk's record, and whether the
+robot's MJX model (sim.robot.build) lies on this process's devices.
 """
 
 from __future__ import annotations
@@ -36,8 +37,10 @@ def config(out: Path):
 def main(out: Path, resume: str = "") -> None:
     distributed.initialize_from_env()  # before any JAX computation
     import jax
+    import numpy as np
 
     from mjx_stairs.rl import runner
+    from mjx_stairs.sim import robot
     from tests.mjx_stairs.rl.toy_env import PointReach
 
     cfg, env = config(out), PointReach(map_shape=(5, 5))
@@ -47,7 +50,10 @@ def main(out: Path, resume: str = "") -> None:
     result = runner.run(cfg, env, run_dir=out / "run", on_chunk=keep(records))
     if resume:
         runner.run(cfg, env, run_dir=out / "resumed", resume=resume, on_chunk=keep(resumed))
-    facts = {"process_index": jax.process_index(), "process_count": jax.process_count(),
+    model = robot.build(np.zeros((5, 5), np.float32), 0.1).mjx_model
+    arrays = [x for x in jax.tree_util.tree_leaves(model) if isinstance(x, jax.Array)]
+    facts = {"robot_model_addressable": all(x.is_fully_addressable for x in arrays),
+             "process_index": jax.process_index(), "process_count": jax.process_count(),
              "devices": len(jax.devices()), "local_devices": len(jax.local_devices()),
              "mesh_devices": int(result.state.params["log_std"].sharding.mesh.devices.size),
              "records": records, "resumed_records": resumed, "stop_reason": result.stop_reason}

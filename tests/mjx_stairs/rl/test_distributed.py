@@ -111,6 +111,8 @@ def test_two_processes_train_as_one_with_four_devices(runs):
     for i, p in enumerate((p0, p1)):
         assert (p["process_index"], p["process_count"]) == (i, 2)
         assert (p["devices"], p["local_devices"], p["mesh_devices"]) == (4, 2, 4)
+        # MJX's default device is process 0's: the robot model must lie on each one's own
+        assert p["robot_model_addressable"]
     assert p0["records"] == p1["records"]  # both processes see the same global metrics
     assert [r["iteration"] for r in p0["records"]] == [1, 2]
     for a, b in zip(one["records"], p0["records"], strict=True):
