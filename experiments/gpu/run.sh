@@ -137,7 +137,7 @@ two_processes() {  # the same short stage-2 run: one process on GPUs 0,1, then t
   echo "== two processes, one GPU each (coordinator localhost:$port)"
   for i in 0 1; do
     MJX_STAIRS_COORDINATOR=localhost:$port MJX_STAIRS_NUM_PROCESSES=2 MJX_STAIRS_PROCESS_ID=$i \
-      JAX_LOCAL_DEVICE_IDS=$i timeout "${TWO_TIMEOUT_S:-240}" python3 -m mjx_stairs train \
+      CUDA_VISIBLE_DEVICES=$i timeout "${TWO_TIMEOUT_S:-240}" python3 -m mjx_stairs train \
       "${args[@]}" --run-dir /tmp/runs/two \
       > "$d/process_$i.log" 2>&1 &
   done
