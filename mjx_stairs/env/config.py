@@ -126,6 +126,14 @@ class EnvConfig:
     action_clip: float = 5.0  # |action| clip before scaling
     max_tilt: float = 1.0  # rad; tilting further ends the episode
     min_base_height: float = 0.12  # m above the terrain under the base; lower ends the episode
+    # "The terrain under the base" for that ending: the mean height at 5 points on a low_line_m
+    # segment along the base's heading, centred under it (within the trunk's 0.38 m, so a side
+    # wall never enters it); 0: the single point under the base (the rule of every result before
+    # the generalist's second run). On a stair the point under a base holding a steady height
+    # above the slope jumps a whole riser at every step nose, so at 17.8 cm risers the point
+    # rule ended climbing robots (docs/diagnosis_code_suite.md); a 0.3 m segment (about a
+    # tread) follows the slope instead. On flat ground both rules are the same.
+    low_line_m: float = 0.0
     terminate_on_trunk_contact: bool = True  # training only; off in evaluation
     spawn_height: float = 0.36  # base height above the spawn floor at reset (m)
     spawn_margin: float = 0.15  # m taken off each side of a tile's spawn rectangle: a Go2 turned

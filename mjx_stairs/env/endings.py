@@ -3,9 +3,10 @@ the metrics every step reports."""
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import jax.numpy as jnp
+import numpy as np
 
 from mjx_stairs.env import rewards as rw
 from mjx_stairs.env.config import EnvConfig
@@ -19,6 +20,22 @@ STEP_METRICS = ("done", "episode_success", "terminated", "truncated", "nan_reset
 DOWN_METRICS = ("done_down", "episode_success_down")
 """More metrics on an atlas walked both ways: episodes that ended walking down, and their
 successes (the trainer logs success_down from them)."""
+
+
+LINE_POINTS = 5
+"""Points on the segment along the heading that the `low` ending averages the terrain over."""
+
+
+def ground_under(height: Callable, x, y, yaw, length: float, xp=jnp):
+    """[...] "the terrain under the base" of the `low` ending for bases at (x, y) with heading
+    `yaw` [...] (EnvConfig.low_line_m): ``height(x, y)`` there for length 0, else its mean at
+    LINE_POINTS points spaced evenly on a `length` segment along the heading, centred on (x, y).
+    ``xp``: jnp, or numpy for host arrays."""
+    if length <= 0:
+        return height(x, y)
+    t = np.linspace(-length / 2, length / 2, LINE_POINTS)
+    c, s = xp.cos(yaw)[..., None], xp.sin(yaw)[..., None]
+    return height(x[..., None] + t * c, y[..., None] + t * s).mean(-1)
 
 
 class Endings(NamedTuple):

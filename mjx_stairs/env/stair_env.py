@@ -282,7 +282,8 @@ class StairEnv(Env):
 
     def _endings(self, kin: Kinematics, q: rw.Quantities, info: dict,
                  finite: jnp.ndarray) -> endings.Endings:
-        clearance = kin.pos[2] - self.terrain_height(kin.pos[0], kin.pos[1])
+        clearance = kin.pos[2] - endings.ground_under(
+            self.terrain_height, kin.pos[0], kin.pos[1], kin.yaw, self.config.low_line_m)
         return endings.endings(self.config, kin, q, info, finite, clearance, self.terrain.size,
                                self._hold_steps, self._episode_steps)
 

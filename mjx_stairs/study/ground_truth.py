@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 from mujoco.mjx._src import support
 
+from mjx_stairs.env import endings
 from mjx_stairs.env import stair_env as envlib
 from mjx_stairs.rl.policy import Policy, policy_action
 from mjx_stairs.sim import box_world as bw
@@ -126,7 +127,9 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
     x, y = qpos[:, 4], qpos[:, 5]
     up_z = 1 - 2 * (x * x + y * y)  # R[2, 2]: the body's z axis against the world's
     tilted = up_z < np.cos(c.max_tilt)
-    ground = np.asarray(env.terrain_height(jnp.asarray(pos[:, 0]), jnp.asarray(pos[:, 1])))
+    height = lambda x, y: np.asarray(env.terrain_height(jnp.asarray(x), jnp.asarray(y)))
+    yaw = np.arctan2(2 * (qpos[:, 3] * qpos[:, 6] + x * y), 1 - 2 * (y * y + qpos[:, 6] ** 2))
+    ground = endings.ground_under(height, pos[:, 0], pos[:, 1], yaw, c.low_line_m, xp=np)
     too_low = pos[:, 2] - ground < c.min_base_height
     wx, wy = (np.asarray(env.atlas_shape[::-1]) - 1) * env.resolution
     outside = (pos[:, 0] < 0) | (pos[:, 1] < 0) | (pos[:, 0] > wx) | (pos[:, 1] > wy)
