@@ -44,6 +44,7 @@ POLICIES = {  # the committed policies the README cites
     "l_shaped_lean": RESULTS / "transfer_lean/l_shaped/policy.npz",
     "spiral_lean": RESULTS / "transfer_lean/spiral/policy.npz",
     "generalist": RESULTS / "generalist/policy.npz",
+    "generalist_line": RESULTS / "generalist_line/policy.npz",  # + 480 it with env.low_line_m
 }
 MESH_POLICIES = ("stage2_u", "stage2_u_lean")  # the default of --mesh-policies
 CODE_EXPORTS = ("code_commercial_u_left_up", "code_commercial_u_left_down")
