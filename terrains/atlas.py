@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from .families import FAMILIES, make_tile, variants
-from .levels import check_family
+from .levels import check_family, check_landing
 from .levels import levels as level_table
 from .tile import (
     CENTRELINE_POINTS,
@@ -131,7 +131,8 @@ class Atlas:
 def build_atlas(families: Sequence[str], schedule: str = "train",
                 levels: Sequence[int] | None = None, variants_per_family: int = 2,
                 resolution: float = DEFAULT_RESOLUTION, tile_size: float = DEFAULT_TILE_SIZE,
-                border: float = 2.0, direction: str = "up", seed: int = 0) -> Atlas:
+                border: float = 2.0, direction: str = "up", seed: int = 0,
+                building_landing: Sequence[float] | None = None) -> Atlas:
     """Tiles of ``families`` (0-based ``levels`` of ``schedule``, default all) in a grid:
     row = level, columns = for each family ``variants_per_family`` tiles cycling through its
     variants. heights [NY, NX] with NX = (2 border + cols tile_size) / res + 1.
@@ -141,7 +142,9 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
     heights are copied, so an env can pick a direction by picking a column).
     seed: the building family samples a staircase per tile from (schedule, level, variant,
     seed + k), k = how many times the column cycle has passed the variant (so repeated
-    variants in a row are different staircases); the other families ignore it."""
+    variants in a row are different staircases); the other families ignore it.
+    building_landing: (lo, hi) m, one landing-depth range for every building level instead of
+    the level's own (None: the levels'); the other families ignore it."""
     families = tuple(families)
     if not families:
         raise ValueError("build_atlas needs at least one family")
@@ -150,6 +153,8 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
     if variants_per_family < 1:
         raise ValueError(f"variants_per_family must be >= 1, got {variants_per_family}")
     _check_border(border, resolution)
+    if building_landing is not None:
+        building_landing = check_landing(building_landing)
     if direction not in ATLAS_DIRECTIONS:
         raise ValueError(f"unknown direction {direction!r}; known: {', '.join(ATLAS_DIRECTIONS)}")
     dirs = ("up", "down") if direction == "both" else (direction,)
@@ -173,7 +178,8 @@ def build_atlas(families: Sequence[str], schedule: str = "train",
             cycle, vi = divmod(vi, len(names))
             if di == 0:
                 tile = make_tile(fam, lvl, names[vi], schedule, resolution, tile_size,
-                                 direction=dirs[0], seed=seed + cycle)
+                                 direction=dirs[0], seed=seed + cycle,
+                                 building_landing=building_landing)
             else:
                 tile = tile.reversed()
             yield tile, fi, vi

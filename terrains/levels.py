@@ -13,7 +13,9 @@ The ``building`` family (real indoor staircases, terrains/building/) has levels 
 RANGES (``BuildingLevel``): every tile samples its own staircase inside them. Its train levels
 are ordered by the difficulty index (riser band first, then narrower width, shallower landings,
 tighter curvature, open sides); ``test`` has the same bands (tiles use other seeds),
-``extended`` the hardest, building-code corner of the space.
+``extended`` the hardest, building-code corner of the space. Their landing-depth lower bound
+falls with the level; ``build_atlas(building_landing=(lo, hi))`` gives every building level one
+landing-depth range instead (``check_landing``).
 
 Level indices are 0-based everywhere in code; file names and the CLI's ``--level`` are 1-based.
 """
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 SCHEDULES = ("train", "test", "extended")
+BUILDING_LANDING = (0.6, 3.0)   # m: bounds of a landing-depth range that overrides the levels'
 
 
 @dataclass(frozen=True)
@@ -207,3 +210,17 @@ def get_level(family: str, level: int, schedule: str = "train") -> Level | Build
         raise ValueError(f"level {level!r} out of range for {family!r} schedule {schedule!r}: "
                          f"valid 0..{len(table) - 1} (0-based)")
     return table[int(level)]
+
+
+def check_landing(landing, name: str = "building_landing") -> tuple[float, float]:
+    """``landing`` as (lo, hi) metres: a landing-depth range that replaces the one of every
+    building level. ValueError naming ``name`` unless it is two numbers with
+    BUILDING_LANDING[0] <= lo <= hi <= BUILDING_LANDING[1]."""
+    lo_b, hi_b = BUILDING_LANDING
+    try:
+        lo, hi = (float(x) for x in landing)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected two numbers [lo, hi] (m), got {landing!r}") from None
+    if not lo_b <= lo <= hi <= hi_b:
+        raise ValueError(f"{name}: expected {lo_b} <= lo <= hi <= {hi_b} m, got {[lo, hi]}")
+    return lo, hi

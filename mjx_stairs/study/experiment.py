@@ -42,6 +42,9 @@ class TerrainConfig:
         "help": "up | down | both: every column is followed by the same tile walked down, so "
                 "a robot's level holds both directions"})
     seed: int = field(default=0, metadata={"help": "which building staircases the tiles are"})
+    building_landing: tuple[float, ...] = field(default=(), metadata={
+        "help": "[lo, hi] m: the landing depths of every building level (U, switchback, L) "
+                "instead of each level's own range; () = the levels'"})
     resolution: float = field(default=0.025, metadata={"help": "grid spacing (m)"})
     tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
     border: float = field(default=2.0, metadata={"help": "flat border around the atlas (m)"})
@@ -58,6 +61,13 @@ class TerrainConfig:
         if unknown or min(self.variants.values(), default=1) < 1:
             raise ConfigError(f"config key 'terrain.variants': families of terrain.families "
                               f"with >= 1 column each, got {dict(self.variants)}")
+        if self.building_landing:
+            from terrains.levels import check_landing
+
+            try:
+                check_landing(self.building_landing, "config key 'terrain.building_landing'")
+            except ValueError as e:
+                raise ConfigError(str(e)) from None
 
 
 
@@ -143,6 +153,8 @@ def build_atlas(terrain: TerrainConfig):
         kwargs.update(direction="both" if both else terrain.directions[0])
     if terrain.seed:
         kwargs.update(seed=terrain.seed)
+    if terrain.building_landing:
+        kwargs.update(building_landing=terrain.building_landing)
     if len(set(counts.values())) == 1:
         return terrains.build_atlas(terrain.families, variants_per_family=counts[
             terrain.families[0]], **kwargs)

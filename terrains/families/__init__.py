@@ -8,9 +8,11 @@ Every tile can be walked "up" (the default) or "down" (Tile.reversed(): same hei
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import ModuleType
+from typing import Sequence
 
-from ..levels import PAPER_FAMILIES, check_family, get_level
+from ..levels import PAPER_FAMILIES, check_family, check_landing, get_level
 from ..tile import DEFAULT_RESOLUTION, DEFAULT_TILE_SIZE, Tile
 from . import building, l_shaped, pyramid, spiral, straight, u_shaped
 from .common import build_tile
@@ -38,14 +40,20 @@ def variants(family: str) -> tuple[str, ...]:
 def make_tile(family: str, level: int, variant: str | None = None, schedule: str = "train",
               resolution: float = DEFAULT_RESOLUTION,
               tile_size: float = DEFAULT_TILE_SIZE, direction: str = "up",
-              seed: int = 0) -> Tile:
+              seed: int = 0, building_landing: Sequence[float] | None = None) -> Tile:
     """One tile of ``family`` at 0-based ``level`` of ``schedule``: heights [n, n],
     n = tile_size / resolution. ``variant`` None -> the family's first variant.
     ``direction`` "down": the same tile walked from the top landing to the foot.
     ``seed``: which of the staircases sampled for (level, variant) (building only; the other
-    families are deterministic and ignore it)."""
+    families are deterministic and ignore it).
+    ``building_landing``: (lo, hi) m, the landing-depth range the staircase is drawn from instead
+    of the level's (building only; the other dimensions are drawn as without it)."""
     check_family(family)
     lv = get_level(family, level, schedule)
+    if building_landing is not None:
+        landing = check_landing(building_landing)
+        if family == "building":
+            lv = replace(lv, landing=landing)
     mod = FAMILIES[family]
     variant = mod.VARIANTS[0] if variant is None else variant
     if variant not in mod.VARIANTS:

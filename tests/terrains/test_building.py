@@ -394,3 +394,43 @@ def test_atlas_with_building_tiles_both_directions():
     down = terrains.build_atlas(["building"], levels=[3], variants_per_family=2,
                                 resolution=0.1, direction="down")
     assert list(down.direction) == [1, 1]
+
+
+def test_building_landing_overrides_the_landing_of_every_level():
+    """build_atlas(building_landing=) (issue 24): without it the levels' own landings, bit for
+    bit; each level's own range as the override changes nothing; (0.9, 0.9) makes every U and
+    switchback 0.9 m deep at levels 1 and 5, the other dimensions drawn as without it."""
+    kw = dict(levels=[0, 4], variants_per_family=11, resolution=0.1)
+    base = terrains.build_atlas(["building"], **kw)
+    none = terrains.build_atlas(["building"], building_landing=None, **kw)
+    assert np.array_equal(base.heights, none.heights)
+    assert np.array_equal(base.spawn, none.spawn) and np.array_equal(base.goal, none.goal)
+    for lvl in (0, 4):
+        own = terrains.get_level("building", lvl).landing
+        one = dict(kw, levels=[lvl])
+        assert np.array_equal(terrains.build_atlas(["building"], **one).heights,
+                              terrains.build_atlas(["building"], building_landing=own,
+                                                   **one).heights)
+    tight = terrains.build_atlas(["building"], building_landing=[0.9, 0.9], **kw)
+    assert not np.array_equal(tight.heights, base.heights)
+    same = ("riser", "tread", "width", "turn", "open_side")
+    for lvl in (0, 4):
+        lv = terrains.get_level("building", lvl)
+        for v in ("u_left", "u_right", "switchback_left", "switchback_right"):
+            for seed in (0, 1):
+                d = terrains.make_tile("building", lvl, v, resolution=0.1, seed=seed)
+                t = terrains.make_tile("building", lvl, v, resolution=0.1, seed=seed,
+                                       building_landing=(0.9, 0.9))
+                assert t.spec["landing"] == 0.9, (lvl, v, seed)
+                assert lv.landing[0] <= d.spec["landing"] <= lv.landing[1], (lvl, v, seed)
+                assert all(t.spec["staircase"][k] == d.spec["staircase"][k] for k in same)
+    u = terrains.make_tile("u_shaped", 4, building_landing=(0.9, 0.9), resolution=0.1)
+    assert u.spec["landing"] == terrains.get_level("u_shaped", 4).landing   # paper: fixed
+
+
+@pytest.mark.parametrize("bad", [[0.9], [1.5, 1.0], [-0.9, 1.8], [0.9, 3.5], "wide", 1.0])
+def test_bad_building_landing_is_one_line_naming_it(bad):
+    with pytest.raises(ValueError, match="building_landing") as e:
+        terrains.build_atlas(["building"], levels=[0], resolution=0.1, building_landing=bad)
+    assert len(str(e.value).splitlines()) == 1
+

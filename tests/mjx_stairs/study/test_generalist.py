@@ -2,6 +2,7 @@
 down on shared levels, bad values fail at load naming the key, and it trains (a few iterations
 of a few robots on the CPU) into a policy whose sidecar says what it was trained to withstand."""
 
+import dataclasses
 import json
 import math
 
@@ -9,6 +10,7 @@ import jax
 import numpy as np
 import pytest
 
+import terrains
 from mjx_stairs import cli
 from mjx_stairs.config import ConfigError
 from mjx_stairs.env import curriculum as cur
@@ -90,11 +92,36 @@ def test_family_weights_pick_families_at_their_rates():
     ("env.route.coarse_points=[1, 4]", "env.route.coarse_points"),
     ("env.goal_mode=final", "env.route.perturb_prob"),
     ("env.robot.joint_damping=-2.0", "env.robot.joint_damping"),
+    ("terrain.building_landing=[0.9]", "terrain.building_landing"),
+    ("terrain.building_landing=[1.5, 1.0]", "terrain.building_landing"),
+    ("terrain.building_landing=[-0.9, 1.8]", "terrain.building_landing"),
 ])
 def test_bad_values_fail_at_load_naming_the_key(override, key):
     with pytest.raises(ConfigError) as e:
         experiment.load(TOML, [override], cpu=True)
     assert f"'{key}'" in str(e.value) and len(str(e.value).splitlines()) == 1
+
+
+def test_building_landing_reaches_the_building_tiles_only():
+    """terrain.building_landing (docs/diagnosis_code_suite.md change 3): off in the file; on,
+    the building columns are those of terrains.build_atlas(building_landing=), the paper
+    family's are unchanged."""
+    assert experiment.load(TOML, cpu=True)[0].terrain.building_landing == ()
+    config, _ = experiment.load(TOML, ["terrain.building_landing=[0.9, 0.9]"], cpu=True)
+    assert config.terrain.building_landing == (0.9, 0.9)
+    small = experiment.TerrainConfig(families=("building", "u_shaped"), levels=(4,),
+                                     variants_per_family=1, variants={"building": 11},
+                                     resolution=0.1)
+    base = experiment.build_atlas(small)
+    tight = experiment.build_atlas(dataclasses.replace(small, building_landing=(0.9, 0.9)))
+    want = terrains.build_atlas(["building"], levels=[4], variants_per_family=11,
+                                resolution=0.1, building_landing=(0.9, 0.9))
+    for t in range(tight.cols):
+        if tight.family[t] == 0:
+            np.testing.assert_array_equal(tight.tile_heights(t), want.tile_heights(t))
+        else:
+            np.testing.assert_array_equal(tight.tile_heights(t), base.tile_heights(t))
+    assert not np.array_equal(tight.heights, base.heights)
 
 
 def test_a_bad_value_is_one_line_from_the_cli(capsys):
