@@ -32,11 +32,19 @@ def _sha(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _policy_folder(name: str) -> str:
+    """generalist_first_run*/ hold the first run's cells, generalist_line*/ the second run's
+    (generalist_line/), the other generalist*/ the first run's successor (generalist/)."""
+    for prefix, policy in (("generalist_first_run", "generalist/first_run"),
+                           ("generalist_line", "generalist_line")):
+        if name.startswith(prefix):
+            return policy
+    return "generalist"
+
+
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
 def test_each_folder_is_its_policys(folder):
-    """generalist*/ hold the current policy's cells, generalist_first_run*/ the first run's."""
-    run = "first_run/" if folder.name.startswith("generalist_first_run") else ""
-    policy = ROOT / f"experiments/results/generalist/{run}policy.onnx"
+    policy = ROOT / f"experiments/results/{_policy_folder(folder.name)}/policy.onnx"
     assert {d["onnx_sha256"] for _, d in tables._cells(folder)} == {_sha(policy)}
 
 
