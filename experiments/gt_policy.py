@@ -30,12 +30,16 @@ def main() -> None:
     ap.add_argument("--schedule", default="test")
     ap.add_argument("--levels", default="1,2,3,4,5,6", help="1-based, comma-separated")
     ap.add_argument("--robots", type=int, default=200, help="robots per level")
+    ap.add_argument("--episode-s", type=float, default=20.0)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--env", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="env overrides after the policy's config (e.g. min_base_height=0.05)")
     ap.add_argument("--out", required=True, type=Path)
     a = ap.parse_args()
     levels = [int(x) - 1 for x in a.levels.split(",")]
     spec = CellSpec(cells=tuple((a.family, a.schedule, lv) for lv in levels),
-                    robots_per_cell=a.robots)
+                    robots_per_cell=a.robots, env_overrides=tuple(a.env),
+                    episode_length_s=a.episode_s)
     rec = success_in_ground_truth(load_policy(a.checkpoint), spec, nthread=a.threads)
     rec["checkpoint"] = str(a.checkpoint)
     a.out.parent.mkdir(parents=True, exist_ok=True)
