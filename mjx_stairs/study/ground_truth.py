@@ -26,6 +26,7 @@ from mujoco.mjx._src import support
 
 from mjx_stairs.env import endings
 from mjx_stairs.env import stair_env as envlib
+from mjx_stairs.env.geometry import quat_yaw
 from mjx_stairs.rl.policy import Policy, policy_action
 from mjx_stairs.sim import box_world as bw
 from mjx_stairs.sim import robot as rb
@@ -128,7 +129,7 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
     up_z = 1 - 2 * (x * x + y * y)  # R[2, 2]: the body's z axis against the world's
     tilted = up_z < np.cos(c.max_tilt)
     height = lambda x, y: np.asarray(env.terrain_height(jnp.asarray(x), jnp.asarray(y)))
-    yaw = np.arctan2(2 * (qpos[:, 3] * qpos[:, 6] + x * y), 1 - 2 * (y * y + qpos[:, 6] ** 2))
+    yaw = quat_yaw(qpos[:, 3:7].T, xp=np)
     ground = endings.ground_under(height, pos[:, 0], pos[:, 1], yaw, c.low_line_m, xp=np)
     too_low = pos[:, 2] - ground < c.min_base_height
     wx, wy = (np.asarray(env.atlas_shape[::-1]) - 1) * env.resolution

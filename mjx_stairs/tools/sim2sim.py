@@ -195,12 +195,12 @@ class Sim:
         pos, rot = self.base()
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             return True
-        if not np.isfinite(sw.terrain_z(self.w, pos[None, :2])[0]):  # off the staircase's grid
-            return True
         length = ev.get("low_line_m", 0.0)  # the sidecar's rule: 5 points along the heading
         t = np.linspace(-length / 2, length / 2, 5) if length > 0 else np.zeros(1)
         heading = rot[:2, 0] / max(np.linalg.norm(rot[:2, 0]), 1e-9)
-        z = sw.terrain_z(self.w, pos[:2] + t[:, None] * heading)
+        z = sw.terrain_z(self.w, pos[:2] + t[:, None] * heading)  # t's middle point: the base
+        if not np.isfinite(z[len(t) // 2]):  # off the staircase's grid
+            return True
         ground = z[np.isfinite(z)].mean()  # points off the grid left out
         return bool(rot[2, 2] < np.cos(ev.get("max_tilt_rad", 1.0))
                     or pos[2] - ground < ev.get("min_base_height_m", 0.12))
