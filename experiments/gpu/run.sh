@@ -14,7 +14,8 @@
 # through jax.distributed), eval-committed (committed policies in the reference physics), code-suite
 # (issue 23: the code suite baseline), fidelity, fidelity-x64, bench-colliders (issue 19: MJX
 # physics options against the ground truth, their speed), transfer-eval, rq1-eval (the transfer
-# matrix and the RQ1 policies in the evaluation physics), pack; and on the host's CPUs beside the
+# matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper
+# (issue 21: stage 2 as the paper has it, SEED=N), pack; and on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
@@ -311,6 +312,27 @@ for step in "$@"; do
         experiments/results/stage2_u_final_goal/policy.npz \
         experiments/results/stage2_u_final_goal_no_stall/policy.npz \
         --robots 1000 --out "$OUT/rq_eval" 2>&1 | grep -v warp ;;
+    # issue 21: stage 2 as the paper has it (stage2_u_paper.toml), with and without the stall
+    # penalty; SEED (default 0) names the run, stage2_u_paper[_no_stall]_s<SEED>, and its carry
+    # folder. eval-paper: every such policy trained in this command (else carried) on the U
+    # test levels, 1000 robots, the evaluation physics, 20 s, at the policy's success radius
+    # (0.8 m, the authors') and at 0.5 m (every other table's), into $OUT/paper_eval/<name>/
+    paper|paper-no-stall)
+      cfg=stage2_u_paper; [ "$step" = paper-no-stall ] && cfg=stage2_u_paper_no_stall
+      train "${cfg}_s${SEED:-0}" "experiments/$cfg.toml" "train.seed=${SEED:-0}" \
+        "train.experiment=${cfg}_s${SEED:-0}" ;;
+    eval-paper)
+      shopt -s nullglob
+      for p in /tmp/policies/stage2_u_paper*.npz .carry/stage2_u_paper*/policy.npz; do
+        name=$(basename "$p" .npz); [ "$name" = policy ] && name=$(basename "$(dirname "$p")")
+        [ -d "$OUT/paper_eval/$name" ] && continue  # trained here and carried: once
+        for r in 0.8 0.5; do
+          [ "$(left)" -lt 90 ] && { echo "no time left for $name at $r m"; break; }
+          timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" \
+            --family u_shaped --robots 1000 --env "success_distance=$r" \
+            --out "$OUT/paper_eval/$name/success_${r}m" 2>&1 | grep -v warp
+        done
+      done ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is
       # left out

@@ -111,6 +111,23 @@ class RouteConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class GoalDrawConfig:
+    """Per-episode goals anywhere on the raised stairs, the authors' stage-2 goals (issue 21;
+    env.goals). Off: every episode's goal is its tile's (on the top landing)."""
+
+    enabled: bool = False
+    min_rise: float = 0.2  # m: goals lie on the centre-line at least this far above the floor
+    random_yaw: bool = True  # goal yaw uniform in [-pi, pi] (false: the line's heading there)
+    stationary_prob: float = 0.05  # chance that the goal is the spawn pose itself
+
+    def __post_init__(self):
+        _require("env.goal_draw", [
+            ("min_rise", self.min_rise, self.min_rise >= 0.0, ">= 0"),
+            ("stationary_prob", self.stationary_prob, 0.0 <= self.stationary_prob <= 1.0,
+             "in [0, 1]")])
+
+
+@dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """The stair env."""
 
@@ -121,6 +138,7 @@ class EnvConfig:
     height_map: HeightMapConfig = HeightMapConfig()
     randomization: RandomizationConfig = RandomizationConfig()
     route: RouteConfig = RouteConfig()
+    goal_draw: GoalDrawConfig = GoalDrawConfig()
     decimation: int = 4  # physics steps per policy step (0.005 s x 4 -> 50 Hz)
     episode_length_s: float = 10.0
     action_clip: float = 5.0  # |action| clip before scaling
@@ -135,6 +153,9 @@ class EnvConfig:
     # tread) follows the slope instead. On flat ground both rules are the same.
     low_line_m: float = 0.0
     terminate_on_trunk_contact: bool = True  # training only; off in evaluation
+    # rad: the spawn yaw is the tile's +- this (the authors' stage 2: pi, any heading); < 0:
+    # the tile's own half-range (45 deg on the paper families)
+    spawn_yaw_half_range: float = -1.0
     spawn_height: float = 0.36  # base height above the spawn floor at reset (m)
     spawn_margin: float = 0.15  # m taken off each side of a tile's spawn rectangle: a Go2 turned
     # 45 deg reaches ~0.45 m from its centre, more than the terrain's 0.35 m wall clearance
@@ -159,7 +180,10 @@ class EnvConfig:
              f"at most one policy step ({step:g} s)"),
             ("route.perturb_prob", self.route.perturb_prob,
              self.route.perturb_prob == 0 or self.goal_mode == "waypoint",
-             "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)")])
+             "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)"),
+            ("goal_draw.enabled", self.goal_draw.enabled,
+             not self.goal_draw.enabled or self.goal_mode == "final",
+             "false unless env.goal_mode = 'final' (the waypoint leads to the tile's goal)")])
 
 
 def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) -> EnvConfig:
@@ -169,6 +193,8 @@ def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) 
         noise=dataclasses.replace(config.noise, enabled=False),
         randomization=dataclasses.replace(config.randomization, enabled=False),
         route=dataclasses.replace(config.route, perturb_prob=0.0),
+        goal_draw=dataclasses.replace(config.goal_draw, enabled=False),  # the tiles' goals
+        spawn_yaw_half_range=-1.0,  # the tiles' spawn headings
         curriculum=dataclasses.replace(config.curriculum, enabled=False),
         terminate_on_trunk_contact=False,
         joint_noise_at_reset=0.0,

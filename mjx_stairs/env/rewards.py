@@ -49,6 +49,9 @@ class RewardConfig:
     heading: float = -0.3  # |goal yaw - base yaw|
     centreline: float = 0.0  # stage 2 centre-line reward
     stall: float = 0.0  # 1 when slower than stall_speed outside stall_goal_radius
+    # tanh((v - 0.1) / 0.2) when faster than 0.1 m/s and further than stall_goal_radius from
+    # the goal, only before fine_after_s (the authors' stage-2 movement_reward, +0.2 there)
+    movement: float = 0.0
     power: float = -1e-4  # sum |tau * qdot|
     torque: float = -1e-5  # sum tau^2
     action_rate: float = -1e-4  # sum (a - a_prev)^2
@@ -119,6 +122,12 @@ def stall(q: Quantities, c: RewardConfig) -> jnp.ndarray:
     return (slow & away).astype(jnp.float32)
 
 
+def movement(q: Quantities, c: RewardConfig) -> jnp.ndarray:
+    moving = (q.planar_speed > 0.1) & (q.goal_distance > c.stall_goal_radius)
+    early = (q.time < c.fine_after_s).astype(jnp.float32)
+    return jnp.where(moving, jnp.tanh((q.planar_speed - 0.1) / 0.2), 0.0) * early
+
+
 def power(q: Quantities, c: RewardConfig) -> jnp.ndarray:
     return jnp.sum(jnp.abs(q.torque * q.joint_vel))
 
@@ -178,6 +187,7 @@ TERMS: dict[str, Callable[[Quantities, RewardConfig], jnp.ndarray]] = {
         heading,
         centreline,
         stall,
+        movement,
         power,
         torque,
         action_rate,

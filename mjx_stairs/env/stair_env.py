@@ -31,7 +31,7 @@ from brax.envs.base import Env, State
 from mujoco import mjx
 
 from mjx_stairs.env import curriculum as cur
-from mjx_stairs.env import endings, observation, perception, routes
+from mjx_stairs.env import endings, goals, observation, perception, routes
 from mjx_stairs.env import randomization as dr
 from mjx_stairs.env import rewards as rw
 from mjx_stairs.env.actuation import STEP_INPUTS, Actuator
@@ -195,12 +195,14 @@ class StairEnv(Env):
         hy = jnp.maximum(sp[4] - c.spawn_margin, 0.0)
         x = sp[0] + jax.random.uniform(ks[0], (), minval=-1.0, maxval=1.0) * hx
         y = sp[1] + jax.random.uniform(ks[1], (), minval=-1.0, maxval=1.0) * hy
-        yaw = sp[5] + jax.random.uniform(ks[2], (), minval=-1.0, maxval=1.0) * sp[6]
+        half = sp[6] if c.spawn_yaw_half_range < 0 else c.spawn_yaw_half_range
+        yaw = sp[5] + jax.random.uniform(ks[2], (), minval=-1.0, maxval=1.0) * half
         joints = self._nominal + jax.random.uniform(
             ks[3], (12,), minval=-c.joint_noise_at_reset, maxval=c.joint_noise_at_reset
         )
         qpos = jnp.concatenate([jnp.array([x, y, sp[2] + c.spawn_height]), yaw_quat(yaw), joints])
         draws = {**dr.draw(ks[4:], c), **perception.draw(rng, c)}
+        draws.update(goals.draw(rng, self.tiles, tile, jnp.stack([x, y]), yaw, c))
         return qpos, {**draws, **routes.draw(rng, self.tiles, tile, c)}
 
     # ------------------------------------------------------------------ step
@@ -242,12 +244,12 @@ class StairEnv(Env):
         qpos, qvel = data.qpos, data.qvel
         qj, vj = self._ids.qpos_joints, self._ids.qvel_joints
         tile = info["tile"]
-        goal = self.tiles.goal[tile]
+        goal = goals.goal_of(info, self.tiles)  # the tile's, or the episode's (env.goals)
         to_goal = goal[:3] - kin.pos
         planar_goal_distance = jnp.linalg.norm(to_goal[:2])
         dc, arc = rw.centreline_geometry(kin.pos[:2], self.tiles.line[tile],
                                          self.tiles.line_cum[tile])
-        path = dc + jnp.maximum(self.tiles.line_len[tile] - arc, 0.0)
+        path = dc + goals.along_line(info, self.tiles, arc)
         path = jnp.where(
             planar_goal_distance < c.rewards.straight_within, jnp.linalg.norm(to_goal), path
         )
@@ -321,7 +323,7 @@ class StairEnv(Env):
         env.tiles.TileTables.waypoint), on the episode's route when info has one (env.routes;
         `arc` is along the tile's centre-line)."""
         if self.config.goal_mode == "final":
-            return self.tiles.goal[tile]
+            return self.tiles.goal[tile] if info is None else goals.goal_of(info, self.tiles)
         if info is not None and "route" in info:
             return waypoint_on(pos, info["route"], info["route_cum"], self.tiles.goal[tile],
                                self.config.waypoint_lookahead_m)
