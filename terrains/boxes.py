@@ -7,6 +7,20 @@ column from a common bottom up to its height; equal-height neighbours merge into
 riser then stands vertically half-way between the last low point and the first high one, where
 the heightfield's slope passes mid-height, and every tread keeps its true height.
 
+Thin boxes get a wide box under them. A riser that is not along x or y (a spiral's, a curved
+wall) cuts its treads into strips one cell wide. A foot sphere that lands fast sinks its centre
+below a tread's top for a step or two (it does on the heightfield too), and inside a strip
+narrower than a foot the nearest face is the cut between two strips of one tread, not the top:
+MuJoCo pushes the sphere sideways from both strips and never up, so the foot sinks into the
+tread and sticks there (the ground truth counted 90 % falls on spiral tiles where the MJX
+evaluation has ~95 % success). So a box narrower than ``MIN_WIDTH`` in y (then in x) gets
+a copy extended that way over every neighbouring row (column) whose cells under it all stand at
+least as high, its top ``UNDER_TOP`` below the strip's: a sunk foot meets that wide box's top
+and is pushed up. The copy never rises above a cell it covers, so the union is unchanged, and
+lying under the tops it leaves a foot standing on a tread (mm deep) one contact per box it
+stands on, as before. Grids whose treads are rectangles (straight, L- and U-shaped tiles) have
+no thin box and get the plain partition.
+
 A tile from a generator and a mesh ray-cast by ``terrains.mesh_import`` both arrive here as a
 height grid, so this is the one place both become boxes.
 
@@ -19,6 +33,14 @@ import numpy as np
 
 BOTTOM_DEPTH = 0.5
 """m: the boxes reach this far below the lowest height of the grid (as a heightfield's base)."""
+
+MIN_WIDTH = 0.1
+"""m: boxes narrower than this in y or x get a wide box under them (module docstring); over four
+foot radii (0.022 m), 4 cells at 0.025 m."""
+
+UNDER_TOP = 0.01
+"""m: how far under the thin box's top its wide box's top lies: below a standing foot's
+penetration (mm), above a sunk foot's (the foot radius, 0.022 m)."""
 
 
 def grid_boxes(
@@ -36,7 +58,9 @@ def grid_boxes(
       quantum: heights closer than this (m) are the same level and merge.
 
     Cells of equal height merge greedily: runs along x within a row, then identical runs of
-    consecutive rows into one box. The boxes' union is exactly the column of every cell.
+    consecutive rows into one box. Under each box narrower than MIN_WIDTH, a wide box
+    UNDER_TOP lower over the neighbouring cells at least as high (module docstring). The boxes'
+    union is exactly the column of every cell.
     """
     h = np.asarray(heights, np.float64)
     if h.ndim != 2 or min(h.shape) < 1:
@@ -66,8 +90,47 @@ def grid_boxes(
     for run, y0 in open_runs.items():
         boxes.append((run[0], run[1], y0, ny, run[2]))
 
-    return _centred(np.array(boxes, np.float64).reshape(-1, 5), resolution, origin, quantum,
+    thin = int(np.ceil(MIN_WIDTH / resolution - 1e-9))  # cells: narrower is fewer
+    grown = _under_thin(boxes, level, thin, int(round(UNDER_TOP / quantum)))
+    return _centred(np.array(grown, np.float64).reshape(-1, 5), resolution, origin, quantum,
                     bottom)
+
+
+def _extent(fits: np.ndarray, lo: int, hi: int) -> tuple[int, int]:
+    """[lo, hi) widened both ways over the consecutive True entries of ``fits`` around it."""
+    while lo > 0 and fits[lo - 1]:
+        lo -= 1
+    while hi < fits.size and fits[hi]:
+        hi += 1
+    return lo, hi
+
+
+def _under_thin(boxes: list[tuple[int, int, int, int, int]], level: np.ndarray,
+                min_cells: int, sink: int) -> list[tuple[int, int, int, int, int]]:
+    """``boxes`` (x0, x1, y0, y1, level) and, under each one narrower than ``min_cells`` in y
+    (then x), a copy ``sink`` levels lower grown over the rows (columns) whose cells under it
+    all stand at least as high; copies that grew nowhere or lie inside another copy dropped."""
+    under = []
+    for x0, x1, y0, y1, lv in boxes:
+        box = (x0, x1, y0, y1)
+        if y1 - y0 < min_cells:
+            y0, y1 = _extent(level[:, x0:x1].min(1) >= lv, y0, y1)
+        if x1 - x0 < min_cells:
+            x0, x1 = _extent(level[y0:y1, :].min(0) >= lv, x0, x1)
+        if (x0, x1, y0, y1) != box:
+            under.append((x0, x1, y0, y1, lv - sink))
+    if not under:
+        return boxes
+    u = np.unique(np.array(under, np.int64), axis=0)
+    keep = np.ones(len(u), bool)
+    for i0 in range(0, len(u), 256):  # [i, j]: copy i inside another copy j, 256 rows at a time
+        c = u[i0 : i0 + 256, None]
+        inside = ((u[None, :, 0] <= c[..., 0]) & (u[None, :, 1] >= c[..., 1])
+                  & (u[None, :, 2] <= c[..., 2]) & (u[None, :, 3] >= c[..., 3])
+                  & (u[None, :, 4] >= c[..., 4]))
+        inside[np.arange(len(c)), i0 + np.arange(len(c))] = False
+        keep[i0 : i0 + 256] = ~inside.any(1)
+    return boxes + [tuple(int(v) for v in row) for row in u[keep]]
 
 
 def _centred(b: np.ndarray, resolution: float, origin: tuple[float, float], quantum: float,
