@@ -19,7 +19,20 @@ least as high, its top ``UNDER_TOP`` below the strip's: a sunk foot meets that w
 and is pushed up. The copy never rises above a cell it covers, so the union is unchanged, and
 lying under the tops it leaves a foot standing on a tread (mm deep) one contact per box it
 stands on, as before. Grids whose treads are rectangles (straight, L- and U-shaped tiles) have
-no thin box and get the plain partition.
+no thin box.
+
+Every other box gets one too (``supports="all"``, the default). The same sinking happens at any
+seam between boxes, not only among strips: a foot that lands fast against a riser, or between
+two boxes of one tread, ends with its centre inside one box next to its side face and inside
+the solid of the other, and the two boxes push it sideways against each other and never up
+(issue 19, experiments/gt_sunk_feet.py, 192 robots of stage2_u: 11, 16 and 11 robots held a
+foot over 1 cm inside the steps for 5 to 964 policy steps on U-shaped extended L3, L4 and
+straight extended L4, almost all of them robots that fell; with supports, none longer than 4). So under every box lies a copy ``UNDER_TOP`` below its
+top, grown over the neighbouring rows, then columns, that stand at least as high (under the
+treads above it and the walls); a sunk foot is inside that copy well away from its sides and
+is pushed up. A wide box's copy is also ``UNDER_TOP`` narrower on every side, so that a foot or
+knee touching a riser meets the riser's box alone, one contact as before (a thin box's copy,
+on spiral tiles, keeps its sides). ``supports="thin"`` is the earlier builder.
 
 A tile from a generator and a mesh ray-cast by ``terrains.mesh_import`` both arrive here as a
 height grid, so this is the one place both become boxes.
@@ -48,6 +61,7 @@ def grid_boxes(
     resolution: float,
     origin: tuple[float, float] = (0.0, 0.0),
     quantum: float = 1e-4,
+    supports: str = "all",
 ) -> np.ndarray:
     """Boxes that cover a height grid: [M, 6] (cx, cy, cz, hx, hy, hz), centre and half-sizes.
 
@@ -56,11 +70,13 @@ def grid_boxes(
       resolution: grid spacing (m).
       origin: (x0, y0), world position of heights[0, 0].
       quantum: heights closer than this (m) are the same level and merge.
+      supports: "all" (every box gets a support copy under it) or "thin" (only boxes narrower
+        than MIN_WIDTH, the builder of 9f67b4d); module docstring.
 
     Cells of equal height merge greedily: runs along x within a row, then identical runs of
-    consecutive rows into one box. Under each box narrower than MIN_WIDTH, a wide box
-    UNDER_TOP lower over the neighbouring cells at least as high (module docstring). The boxes'
-    union is exactly the column of every cell.
+    consecutive rows into one box. Under each box (``supports``), a wide box UNDER_TOP lower over
+    the neighbouring cells at least as high (module docstring). The boxes' union is exactly the
+    column of every cell.
     """
     h = np.asarray(heights, np.float64)
     if h.ndim != 2 or min(h.shape) < 1:
@@ -69,6 +85,8 @@ def grid_boxes(
         raise ValueError("heights contain NaN or infinite values")
     if not resolution > 0:
         raise ValueError(f"resolution must be > 0, got {resolution}")
+    if supports not in ("all", "thin"):
+        raise ValueError(f"supports must be 'all' or 'thin', got {supports!r}")
     level = np.round(h / quantum).astype(np.int64)
     bottom = float(h.min()) - BOTTOM_DEPTH
     ny, nx = level.shape
@@ -91,8 +109,8 @@ def grid_boxes(
         boxes.append((run[0], run[1], y0, ny, run[2]))
 
     thin = int(np.ceil(MIN_WIDTH / resolution - 1e-9))  # cells: narrower is fewer
-    grown = _under_thin(boxes, level, thin, int(round(UNDER_TOP / quantum)))
-    return _centred(np.array(grown, np.float64).reshape(-1, 5), resolution, origin, quantum,
+    grown = _under_thin(boxes, level, thin, int(round(UNDER_TOP / quantum)), supports == "all")
+    return _centred(np.array(grown, np.float64).reshape(-1, 6), resolution, origin, quantum,
                     bottom)
 
 
@@ -106,37 +124,45 @@ def _extent(fits: np.ndarray, lo: int, hi: int) -> tuple[int, int]:
 
 
 def _under_thin(boxes: list[tuple[int, int, int, int, int]], level: np.ndarray,
-                min_cells: int, sink: int) -> list[tuple[int, int, int, int, int]]:
-    """``boxes`` (x0, x1, y0, y1, level) and, under each one narrower than ``min_cells`` in y
-    (then x), a copy ``sink`` levels lower grown over the rows (columns) whose cells under it
-    all stand at least as high; copies that grew nowhere or lie inside another copy dropped."""
+                min_cells: int, sink: int, every: bool = False) -> list[tuple[int, ...]]:
+    """``boxes`` (x0, x1, y0, y1, level) as (..., 0) and, under each one narrower than
+    ``min_cells`` in y (then x), or under every box if ``every``, a copy ``sink`` levels lower
+    grown over the rows (columns) whose cells under it all stand at least as high, as
+    (x0, x1, y0, y1, level, inset) with inset 1 for a wide box's copy (its sides drawn in by
+    UNDER_TOP), 0 for a thin one's; copies that grew nowhere or lie inside another copy
+    dropped."""
     under = []
     for x0, x1, y0, y1, lv in boxes:
         box = (x0, x1, y0, y1)
-        if y1 - y0 < min_cells:
+        thin = y1 - y0 < min_cells or x1 - x0 < min_cells
+        if not (thin or every):
+            continue
+        if y1 - y0 < min_cells or not thin:
             y0, y1 = _extent(level[:, x0:x1].min(1) >= lv, y0, y1)
-        if x1 - x0 < min_cells:
+        if x1 - x0 < min_cells or not thin:
             x0, x1 = _extent(level[y0:y1, :].min(0) >= lv, x0, x1)
         if (x0, x1, y0, y1) != box:
-            under.append((x0, x1, y0, y1, lv - sink))
+            under.append((x0, x1, y0, y1, lv - sink, 0 if thin else 1))
+    plain = [(*b, 0) for b in boxes]
     if not under:
-        return boxes
+        return plain
     u = np.unique(np.array(under, np.int64), axis=0)
     keep = np.ones(len(u), bool)
     for i0 in range(0, len(u), 256):  # [i, j]: copy i inside another copy j, 256 rows at a time
         c = u[i0 : i0 + 256, None]
         inside = ((u[None, :, 0] <= c[..., 0]) & (u[None, :, 1] >= c[..., 1])
                   & (u[None, :, 2] <= c[..., 2]) & (u[None, :, 3] >= c[..., 3])
-                  & (u[None, :, 4] >= c[..., 4]))
+                  & (u[None, :, 4] >= c[..., 4]) & (u[None, :, 5] <= c[..., 5]))
         inside[np.arange(len(c)), i0 + np.arange(len(c))] = False
         keep[i0 : i0 + 256] = ~inside.any(1)
-    return boxes + [tuple(int(v) for v in row) for row in u[keep]]
+    return plain + [tuple(int(v) for v in row) for row in u[keep]]
 
 
 def _centred(b: np.ndarray, resolution: float, origin: tuple[float, float], quantum: float,
              bottom: float) -> np.ndarray:
-    """Grid boxes ``b`` [M, 5] (x0, x1, y0, y1, level; [x0, x1) in cells) as [M, 6] (cx, cy, cz,
-    hx, hy, hz) in metres from ``bottom`` up to level * quantum, sorted by y then x."""
+    """Grid boxes ``b`` [M, 6] (x0, x1, y0, y1, level, inset; [x0, x1) in cells) as [M, 6]
+    (cx, cy, cz, hx, hy, hz) in metres from ``bottom`` up to level * quantum, sides drawn in by
+    inset * UNDER_TOP, sorted by y then x."""
     x0, y0 = origin
     lo_x = x0 + (b[:, 0] - 0.5) * resolution
     hi_x = x0 + (b[:, 1] - 0.5) * resolution
@@ -148,8 +174,8 @@ def _centred(b: np.ndarray, resolution: float, origin: tuple[float, float], quan
             0.5 * (lo_x + hi_x),
             0.5 * (lo_y + hi_y),
             0.5 * (top + bottom),
-            0.5 * (hi_x - lo_x),
-            0.5 * (hi_y - lo_y),
+            0.5 * (hi_x - lo_x) - b[:, 5] * UNDER_TOP,
+            0.5 * (hi_y - lo_y) - b[:, 5] * UNDER_TOP,
             0.5 * (top - bottom),
         ],
         axis=-1,

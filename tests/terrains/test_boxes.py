@@ -21,7 +21,7 @@ def test_boxes_reproduce_every_grid_height(family):
 def test_a_riser_stands_vertically_half_way_between_grid_points():
     h = np.zeros((3, 6), np.float32)
     h[:, 3:] = 0.17
-    boxes = grid_boxes(h, 0.1)
+    boxes = grid_boxes(h, 0.1, supports="thin")
     assert len(boxes) == 2
     top = box_top_height(boxes, np.array([0.249, 0.251]), np.array([0.1, 0.1]))
     np.testing.assert_allclose(top, [0.0, 0.17], atol=1e-6)
@@ -36,11 +36,11 @@ def test_bad_grids_are_refused():
 
 @pytest.mark.parametrize("family", ["straight", "u_shaped", "l_shaped"])
 def test_rectangular_treads_get_the_plain_partition(family):
-    """No box is thin where every riser runs along x or y: the boxes tile the grid, none overlaps
-    (the ground truth's straight, L and U worlds are the ones measured before thin boxes got a
-    wide box under them)."""
+    """No box is thin where every riser runs along x or y: with supports="thin" the boxes tile
+    the grid, none overlaps (the ground truth's straight, L and U worlds as measured before every
+    box got a support)."""
     tile = terrains.make_tile(family, 5, schedule="test", resolution=0.025)
-    boxes = grid_boxes(tile.heights, tile.resolution)
+    boxes = grid_boxes(tile.heights, tile.resolution, supports="thin")
     assert np.min(2 * boxes[:, 3:5]) >= MIN_WIDTH - 1e-9
     area = np.sum(4 * boxes[:, 3] * boxes[:, 4])
     assert area == pytest.approx(tile.heights.size * tile.resolution**2, rel=1e-9)
@@ -89,3 +89,52 @@ def test_a_foot_stamped_into_a_spiral_tread_is_pushed_back_up():
         mujoco.mj_step(model, data)
     centre = data.qpos.reshape(-1, 7)[:, 2]
     assert np.all(centre - top > 0.015)  # on the tread, ~2 mm deep (measured 0.0196-0.0197)
+
+
+@pytest.mark.parametrize("family, schedule, level", [("u_shaped", "extended", 2),
+                                                     ("straight", "extended", 3)])
+def test_a_foot_driven_into_a_riser_seam_is_pushed_back_up(family, schedule, level,
+                                                           supports="all"):
+    """On U-shaped and straight tiles (no thin box) a foot sphere driven fast forward and down
+    into the corner of a tread and the next riser used to sink into the seam there, its centre
+    inside the tread's box beside the next step's, pushed sideways by the two and never up
+    (measured with supports="thin": all 40 here ended sunk, not standing on the tread; the
+    ground truth's feet held 1-20 cm inside the steps, issue 19). The support under every box
+    pushes each one back up onto the tread."""
+    import mujoco
+
+    tile = terrains.make_tile(family, level, schedule=schedule, resolution=0.025)
+    h, res = tile.heights, tile.resolution
+    boxes = grid_boxes(h, res, supports=supports)
+    level_ = np.round(h, 4)
+    lo, hi = level_[:, :-1], level_[:, 1:]
+    iy, ix = np.nonzero((hi > lo) & (hi - lo < 0.3) & (lo > level_.min()))  # riser up along x
+    rng = np.random.default_rng(0)
+    pick = rng.choice(len(iy), 40, replace=False)
+    face = (ix[pick] + 0.5) * res
+    x = face - rng.uniform(0.0, 0.03, 40)  # centre 0-3 cm before the riser's face
+    y = (iy[pick] + rng.uniform(-0.5, 0.5, 40)) * res
+    top = box_top_height(boxes, x, y)
+    spec = mujoco.MjSpec()
+    spec.option.timestep = 0.005
+    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    for cx, cy, cz, hx, hy, hz in boxes:
+        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, pos=[cx, cy, cz],
+                                size=[hx, hy, hz], contype=0, conaffinity=1)
+    for px, py, pz in zip(x, y, top + 0.03, strict=True):
+        body = spec.worldbody.add_body(pos=[px, py, pz])
+        body.add_freejoint()
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.022, 0, 0], mass=0.2,
+                      contype=1, conaffinity=0, friction=[0.8, 0.02, 0.01],
+                      solref=[0.02, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2.0])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qvel.reshape(-1, 6)[:, 0] = 2.0  # a foot swinging into the riser
+    data.qvel.reshape(-1, 6)[:, 2] = -6.0  # and landing fast
+    data.xfrc_applied[1:, 0] = 5.0
+    data.xfrc_applied[1:, 2] = -20.0  # the leg pressing it down and forward
+    for _ in range(60):
+        mujoco.mj_step(model, data)
+    p = data.qpos.reshape(-1, 7)[:, :3]
+    assert np.all(p[:, 0] < face)  # still before the riser
+    assert np.all(p[:, 2] - top > 0.015)  # on the tread, ~2 mm deep (measured 0.019-0.020)
