@@ -10,9 +10,10 @@ episode ends. Prints counts by outcome (success / fall / time-out).
     JAX_PLATFORMS=cpu PYTHONPATH=. python experiments/gt_sunk_feet.py --cell 8 --robots 32 \
         [--episode-s 20] [--supports all|thin] [--out OUT.json]
 
-The spawns are gt_uturn_probe.py's (its spec_of). Cells index experiments/gpu/fidelity.py's CELLS (8: U-shaped extended L3, 9: L4, 15: straight
-extended L4). --supports picks terrains.boxes.grid_boxes' supports for the box world (the
-builder's default when left out; "thin" is the builder before every box got a support).
+The spawns are gt_uturn_probe.py's (its spec_of). Cells index experiments/gpu/fidelity.py's
+CELLS (8: U-shaped extended L3, 9: L4, 15: straight extended L4). --supports picks
+terrains.boxes.grid_boxes' supports for the box world (the builder's default when left out;
+"thin" is the builder before every box got a support).
 """
 
 from __future__ import annotations

@@ -23,16 +23,17 @@ no thin box.
 
 Every other box gets one too (``supports="all"``, the default). The same sinking happens at any
 seam between boxes, not only among strips: a foot that lands fast against a riser, or between
-two boxes of one tread, ends with its centre inside one box next to its side face and inside
-the solid of the other, and the two boxes push it sideways against each other and never up
-(issue 19, experiments/gt_sunk_feet.py, 192 robots of stage2_u: 11, 16 and 11 robots held a
-foot over 1 cm inside the steps for 5 to 964 policy steps on U-shaped extended L3, L4 and
-straight extended L4, almost all of them robots that fell; with supports, none longer than 4). So under every box lies a copy ``UNDER_TOP`` below its
-top, grown over the neighbouring rows, then columns, that stand at least as high (under the
-treads above it and the walls); a sunk foot is inside that copy well away from its sides and
-is pushed up. A wide box's copy is also ``UNDER_TOP`` narrower on every side, so that a foot or
-knee touching a riser meets the riser's box alone, one contact as before (a thin box's copy,
-on spiral tiles, keeps its sides). ``supports="thin"`` is the earlier builder.
+two boxes of one tread, ends with its centre inside one box next to its side face and inside the
+solid of the other, and the two boxes push it sideways against each other and never up (issue
+19, experiments/gt_sunk_feet.py, 192 robots of stage2_u: 11, 16 and 11 robots held a foot over 1
+cm inside the steps for 5 to 964 policy steps on U-shaped extended L3, L4 and straight extended
+L4, almost all of them robots that fell; with supports, none longer than 4). So under every box
+lies a copy ``UNDER_TOP`` below its top, grown over the neighbouring rows, then columns, that
+stand at least as high (under the treads above it and the walls); a sunk foot is inside that
+copy well away from its sides and is pushed up. A wide box's copy is also ``UNDER_TOP`` narrower
+on every side, so that a foot or knee touching a riser meets the riser's box alone, one contact
+as before (a thin box's copy, on spiral tiles, keeps its sides). ``supports="thin"`` is the
+earlier builder.
 
 A tile from a generator and a mesh ray-cast by ``terrains.mesh_import`` both arrive here as a
 height grid, so this is the one place both become boxes.

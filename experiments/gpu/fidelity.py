@@ -44,6 +44,16 @@ OPTIONS = {  # env overrides of each physics option
     "columns_converged": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
                           "robot.solver_iterations=8", "robot.ls_iterations=10"),
     "evaluation": ("robot.physics=evaluation",),  # the named preset: columns_converged
+    # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
+    # (8): is a few iterations' convergence enough? Their speed: run.sh step bench-options.
+    "columns_n2": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
+                   "robot.solver_iterations=2", "robot.ls_iterations=5"),
+    "columns_n3": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
+                   "robot.solver_iterations=3", "robot.ls_iterations=5"),
+    "columns_n4": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
+                   "robot.solver_iterations=4", "robot.ls_iterations=8"),
+    "columns_noshin_n3": ("robot.terrain_contacts=columns", "robot.shin_collision=false",
+                          "robot.solver_iterations=3", "robot.ls_iterations=5"),
 }
 CELLS = (
     [("u_shaped", "test", lv) for lv in range(6)]

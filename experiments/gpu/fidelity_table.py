@@ -5,8 +5,8 @@
 Ground truth: gt_supported/ (the box staircase with a support under every box's top, d08b354:
 no foot is held sunk in a seam between boxes; 200 episodes per cell). --before: the box
 staircase before it, gt1000/ (1000 episodes per cell) where present, else gt/ (200). MJX:
-every mjx*/mjx_<option>.json under the root (1000 robots per cell, 2.5 cm grid), one column
-each.
+mjx_<option>.json in the options' folders under the root (1000 robots per cell, 2.5 cm grid;
+issue 22's candidates in mjx_columns_*/), one column each.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from pathlib import Path
 
 ORDER = ("reference", "lean", "nearest_full", "mjx_converged", "columns", "columns_converged",
          "columns_converged_x64", "evaluation")
+"""Column order; options not named here (issue 22's candidates) follow in name order."""
 
 
 def _ground_truth(root: Path, before: bool = False) -> dict:
@@ -34,11 +35,13 @@ def _ground_truth(root: Path, before: bool = False) -> dict:
 def main(root: Path, before: bool = False) -> None:
     gt = _ground_truth(root, before)
     mjx = {}
-    for folder in ("mjx", "mjx_converged", "mjx_columns", "mjx_x64", "mjx_eval"):
+    folders = ["mjx", "mjx_converged", "mjx_columns", "mjx_x64", "mjx_eval"]
+    folders += sorted(p.name for p in root.glob("mjx_columns_*"))  # issue 22's candidates
+    for folder in folders:  # not mjx_res0125/ (another grid)
         for f in sorted((root / folder).glob("mjx_*.json")):
             r = json.loads(f.read_text())
             mjx[r["option"]] = r
-    options = [o for o in ORDER if o in mjx]
+    options = [o for o in ORDER if o in mjx] + sorted(o for o in mjx if o not in ORDER)
     print("| policy | cell | ground truth (n) | " + " | ".join(options) + " |")
     print("|---|---|---|" + "---|" * len(options))
     worst = {o: (0.0, 0) for o in options}

@@ -15,7 +15,8 @@
 # (issue 23: the code suite baseline), fidelity, fidelity-x64, bench-colliders (issue 19: MJX
 # physics options against the ground truth, their speed), transfer-eval, rq1-eval (the transfer
 # matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper
-# (issue 21: stage 2 as the paper has it, SEED=N), pack; and on the host's CPUs beside the
+# (issue 21: stage 2 as the paper has it, SEED=N), bench-options (issue 22: the speed of
+# physics between columns and the evaluation physics), pack; and on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
@@ -217,6 +218,19 @@ for step in "$@"; do
       bench "$OUT/scaling/scaling_${n}gpu.json" experiments/stage2_u_lean.toml \
         --devices "${SCALING_DEVICES:-1,$n}" ;;
     two-processes) two_processes ;;
+    # issue 22: the physics-only and training rates (4096 robots, stage2_u.toml's U atlas) of
+    # the candidate physics between "columns" and the evaluation physics (fidelity.py's
+    # columns_n2, columns_n3, columns_n4, columns_noshin_n3; BENCH_OPTIONS to choose), beside
+    # the evaluation physics itself; their fidelity: step fidelity with FIDELITY_OPTIONS=...
+    bench-options)
+      for opt in ${BENCH_OPTIONS:-evaluation columns_n2 columns_n3 columns_n4 columns_noshin_n3}; do
+        [ "$(left)" -lt 120 ] && { echo "no time left for $opt"; break; }
+        ov=$(python3 -c "import sys; sys.path.insert(0, 'experiments/gpu'); import fidelity; \
+print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
+        timeout $(( $(left) - 15 )) python3 -m mjx_stairs bench --config experiments/stage2_u.toml \
+          --robots 4096 --parts physics,train $ov --out "$OUT/bench/options_$opt.json" 2>&1 \
+          | grep -v warp
+      done ;;
     # committed policies (EVAL_RUNS: names under experiments/results/) in the reference physics,
     # loaded as a robot runs them (float32 encoder), into $OUT/eval/<name>
     eval-committed)
