@@ -15,7 +15,8 @@
 # (issue 23: the code suite baseline), fidelity, fidelity-x64, bench-colliders (issue 19: MJX
 # physics options against the ground truth, their speed), transfer-eval, rq1-eval (the transfer
 # matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper
-# (issue 21: stage 2 as the paper has it, SEED=N), bench-options (issue 22: the speed of
+# (issue 21: stage 2 as the paper has it, SEED=N), straight-paper, l-shaped-paper, spiral-paper,
+# transfer-paper (RQ2 in the paper's setting), bench-options (issue 22: the speed of
 # physics between columns and the evaluation physics), pack; and on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
@@ -335,6 +336,23 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
       cfg=stage2_u_paper; [ "$step" = paper-no-stall ] && cfg=stage2_u_paper_no_stall
       train "${cfg}_s${SEED:-0}" "experiments/$cfg.toml" "train.seed=${SEED:-0}" \
         "train.experiment=${cfg}_s${SEED:-0}" ;;
+    # RQ2 in the paper's setting: the family models (experiments/<family>_paper.toml, resumed
+    # from .carry/<family>_paper/), then transfer-paper: transfer_matrix_paper.toml's matrix
+    # (committed models, else the ones trained here or carried), 1000 robots per cell
+    straight-paper|l-shaped-paper|spiral-paper)
+      fam=${step%-paper}; fam=${fam//-/_}
+      train "${fam}_paper" "experiments/${fam}_paper.toml" ;;
+    transfer-paper)
+      models=/tmp/transfer_paper.toml; echo "[models]" > $models
+      for fam in u_shaped straight l_shaped spiral; do
+        n=${fam}_paper; [ $fam = u_shaped ] && n=stage2_u_paper
+        p=experiments/results/$n/policy.npz; [ -f "$p" ] || p=/tmp/policies/$n.npz
+        [ -f "$p" ] || p=.carry/$n/policy.npz
+        echo "$fam = \"$p\"" >> $models
+      done
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
+      timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix --config $models \
+        --robots 1000 --out "$OUT/transfer_paper" 2>&1 | grep -v warp ;;
     eval-paper)
       shopt -s nullglob
       for p in /tmp/policies/stage2_u_paper*.npz .carry/stage2_u_paper*/policy.npz; do
