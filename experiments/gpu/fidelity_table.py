@@ -3,7 +3,8 @@
   python experiments/gpu/fidelity_table.py experiments/results/ground_truth [--before] > TABLE.md
 
 Ground truth: gt_supported/ (the box staircase with a support under every box's top, d08b354:
-no foot is held sunk in a seam between boxes; 200 episodes per cell). --before: the box
+no foot is held sunk in a seam between boxes; 200 episodes per cell), gt_supported1000/ (1000,
+the MJX evaluation's own starts) where present. --before: the box
 staircase before it, gt1000/ (1000 episodes per cell) where present, else gt/ (200). MJX:
 mjx_<option>.json in the options' folders under the root (1000 robots per cell, 2.5 cm grid;
 issue 22's candidates in mjx_columns_*/), one column each.
@@ -23,7 +24,8 @@ ORDER = ("reference", "lean", "nearest_full", "mjx_converged", "columns", "colum
 
 def _ground_truth(root: Path, before: bool = False) -> dict:
     gt = {}
-    for folder in (("gt", "gt1000") if before else ("gt_supported",)):  # the later one wins
+    for folder in (("gt", "gt1000") if before else ("gt_supported", "gt_supported1000")):
+        # the later folder (more episodes) wins
         for f in sorted((root / folder).glob("gt_*.json")):
             r = json.loads(f.read_text())
             c = r["cells"][0]
