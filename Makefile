@@ -20,7 +20,7 @@ TEST_WORKERS ?= 2
 # of 5.8). Flags already in XLA_FLAGS come after these, so they win. bench keeps the defaults.
 CPU_XLA := $(if $(HAS_GPU),,XLA_FLAGS="--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1 $$XLA_FLAGS")
 
-.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-generalist ablation eval exp1 transfer-matrix bench clean-venv
+.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-stage2-paper train-generalist ablation eval exp1 transfer-matrix bench clean-venv
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -44,6 +44,9 @@ train-stage2: $(SETUP)
 
 train-stage2-fast: $(SETUP)  # lean settings (issue 7): 417 k vs 187 k env steps/s on an H100 (stage-2 success: experiments/README.md)
 	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/stage2_u_lean.toml $(ARGS)
+
+train-stage2-paper: $(SETUP)  # issue 21: stage 2 as the paper has it (final goal drawn on the stairs, evaluation physics)
+	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/stage2_u_paper.toml $(ARGS)
 
 train-generalist: $(SETUP)  # issue 24: building stairs up and down, robust to a real Go2 (from stage 1)
 	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/generalist.toml $(ARGS)
