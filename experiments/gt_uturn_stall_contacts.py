@@ -110,7 +110,7 @@ def main(gt_path, mjx_path, out):
         riser = float(np.median(steps[steps > 0.05])) if (steps > 0.05).any() else np.nan
         k0 = int(max(d["stall"][b], 0))
 
-        def where(q):
+        def where(q, line3=line3, cum=cum):
             from mjx_stairs.env import rewards as rw
             off, arc = rw.centreline_geometry(jnp.asarray(q[:2]), jnp.asarray(line3[:, :2]),
                                               jnp.asarray(cum))
