@@ -110,7 +110,7 @@ def grid_boxes(
         boxes.append((run[0], run[1], y0, ny, run[2]))
 
     thin = int(np.ceil(MIN_WIDTH / resolution - 1e-9))  # cells: narrower is fewer
-    grown = _under_thin(boxes, level, thin, int(round(UNDER_TOP / quantum)), supports == "all")
+    grown = _with_supports(boxes, level, thin, int(round(UNDER_TOP / quantum)), supports == "all")
     return _centred(np.array(grown, np.float64).reshape(-1, 6), resolution, origin, quantum,
                     bottom)
 
@@ -124,7 +124,7 @@ def _extent(fits: np.ndarray, lo: int, hi: int) -> tuple[int, int]:
     return lo, hi
 
 
-def _under_thin(boxes: list[tuple[int, int, int, int, int]], level: np.ndarray,
+def _with_supports(boxes: list[tuple[int, int, int, int, int]], level: np.ndarray,
                 min_cells: int, sink: int, every: bool = False) -> list[tuple[int, ...]]:
     """``boxes`` (x0, x1, y0, y1, level) as (..., 0) and, under each one narrower than
     ``min_cells`` in y (then x), or under every box if ``every``, a copy ``sink`` levels lower

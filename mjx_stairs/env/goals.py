@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from mjx_stairs.env.config import EnvConfig
-from mjx_stairs.env.tiles import TileTables
+from mjx_stairs.env.tiles import TileTables, waypoint_on
 
 
 def active(config: EnvConfig) -> bool:
@@ -52,21 +52,16 @@ def draw(rng: jax.Array, tiles: TileTables, tile: jnp.ndarray, spawn_xy: jnp.nda
     k = jax.random.split(jax.random.fold_in(rng, 7), 3)
     line3, cum = tiles.line3[tile], tiles.line_cum[tile]
     raised = line3[:, 2] >= tiles.floor[tile] + gc.min_rise
-    # Uniform over [first, last] raised arc length; a staircase that never rises that far
-    # (or a line without raised points) keeps the tile's goal at the line's end.
+    # uniform over [first, last] raised arc length
     lo = jnp.min(jnp.where(raised, cum, cum[-1]))
     hi = jnp.max(jnp.where(raised, cum, lo))
     s = lo + jax.random.uniform(k[0]) * (hi - lo)
-    i = jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
-    seg = line3[i + 1] - line3[i]
-    t = jnp.clip((s - cum[i]) / jnp.maximum(cum[i + 1] - cum[i], 1e-6), 0.0, 1.0)
-    point = line3[i] + t * seg
-    line_yaw = jnp.arctan2(seg[1], seg[0])
+    # the point at s with the line's heading there (the tile's goal at the line's end, also
+    # when the staircase never rises that far)
+    on_line = waypoint_on(None, line3, cum, tiles.goal[tile], 0.0, arc=s)
     yaw = jnp.where(gc.random_yaw, jax.random.uniform(k[1], minval=-jnp.pi, maxval=jnp.pi),
-                    line_yaw)
-    drawn = jnp.concatenate([point, yaw[None]])
-    at_end = s >= cum[-1] - 1e-6
-    drawn = jnp.where(at_end, tiles.goal[tile], drawn)
+                    on_line[3])
+    drawn = jnp.where(s >= cum[-1], on_line, on_line.at[3].set(yaw))
     # The stationary goal: the spawn pose itself, on the tile's floor at the spawn.
     spawn_z = tiles.spawn[tile, 2]
     stay = jax.random.uniform(k[2]) < gc.stationary_prob

@@ -46,6 +46,33 @@ def test_rectangular_treads_get_the_plain_partition(family):
     assert area == pytest.approx(tile.heights.size * tile.resolution**2, rel=1e-9)
 
 
+def _stamp_feet(boxes, x, y, z, velocity, push, steps):
+    """[N, 3] the centres of foot spheres (Go2 foot radius, mass and contact parameters) started
+    at (x, y, z) over ``boxes`` with velocity (vx, vz) and a constant force (fx, fz), after
+    ``steps`` MuJoCo steps of 5 ms."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.option.timestep = 0.005
+    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    for cx, cy, cz, hx, hy, hz in boxes:
+        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, pos=[cx, cy, cz],
+                                size=[hx, hy, hz], contype=0, conaffinity=1)
+    for px, py, pz in zip(x, y, z, strict=True):
+        body = spec.worldbody.add_body(pos=[px, py, pz])
+        body.add_freejoint()
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.022, 0, 0], mass=0.2,
+                      contype=1, conaffinity=0, friction=[0.8, 0.02, 0.01],
+                      solref=[0.02, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2.0])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qvel.reshape(-1, 6)[:, [0, 2]] = velocity
+    data.xfrc_applied[1:, [0, 2]] = push
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    return data.qpos.reshape(-1, 7)[:, :3]
+
+
 def test_a_foot_stamped_into_a_spiral_tread_is_pushed_back_up():
     """A spiral's treads are strips one cell wide between its curved risers. A foot sphere (the
     Go2's: radius 0.022 m, its contact parameters) landing fast sinks its centre below a tread's
@@ -53,8 +80,6 @@ def test_a_foot_stamped_into_a_spiral_tread_is_pushed_back_up():
     sank into the tread (measured: 29 of 40 spheres here ended 2.2 cm (median) under the top,
     the cause of the ground truth's 90 % falls on spiral tiles). The wide box under the strips
     pushes every one back up to stand on the tread, as on a plain slab."""
-    import mujoco
-
     tile = terrains.make_tile("spiral", 0, schedule="test", resolution=0.025)
     h, res = tile.heights, tile.resolution
     boxes = grid_boxes(h, res)
@@ -69,25 +94,8 @@ def test_a_foot_stamped_into_a_spiral_tread_is_pushed_back_up():
     x = (ix[pick] + rng.uniform(-0.5, 0.5, 40)) * res
     y = (iy[pick] + rng.uniform(-0.5, 0.5, 40)) * res
     top = box_top_height(boxes, x, y)
-    spec = mujoco.MjSpec()
-    spec.option.timestep = 0.005
-    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
-    for cx, cy, cz, hx, hy, hz in boxes:
-        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, pos=[cx, cy, cz],
-                                size=[hx, hy, hz], contype=0, conaffinity=1)
-    for px, py, pz in zip(x, y, top + 0.03, strict=True):
-        body = spec.worldbody.add_body(pos=[px, py, pz])
-        body.add_freejoint()
-        body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.022, 0, 0], mass=0.2,
-                      contype=1, conaffinity=0, friction=[0.8, 0.02, 0.01],
-                      solref=[0.02, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2.0])
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    data.qvel.reshape(-1, 6)[:, 2] = -4.0  # a foot landing fast
-    data.xfrc_applied[1:, 2] = -20.0  # the leg pressing it down
-    for _ in range(40):
-        mujoco.mj_step(model, data)
-    centre = data.qpos.reshape(-1, 7)[:, 2]
+    p = _stamp_feet(boxes, x, y, top + 0.03, velocity=(0.0, -4.0), push=(0.0, -20.0), steps=40)
+    centre = p[:, 2]  # a foot landing fast, the leg pressing it down
     assert np.all(centre - top > 0.015)  # on the tread, ~2 mm deep (measured 0.0196-0.0197)
 
 
@@ -101,8 +109,6 @@ def test_a_foot_driven_into_a_riser_seam_is_pushed_back_up(family, schedule, lev
     (measured with supports="thin": all 40 here ended sunk, not standing on the tread; the
     ground truth's feet held 1-20 cm inside the steps, issue 19). The support under every box
     pushes each one back up onto the tread."""
-    import mujoco
-
     tile = terrains.make_tile(family, level, schedule=schedule, resolution=0.025)
     h, res = tile.heights, tile.resolution
     boxes = grid_boxes(h, res, supports=supports)
@@ -115,26 +121,7 @@ def test_a_foot_driven_into_a_riser_seam_is_pushed_back_up(family, schedule, lev
     x = face - rng.uniform(0.0, 0.03, 40)  # centre 0-3 cm before the riser's face
     y = (iy[pick] + rng.uniform(-0.5, 0.5, 40)) * res
     top = box_top_height(boxes, x, y)
-    spec = mujoco.MjSpec()
-    spec.option.timestep = 0.005
-    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
-    for cx, cy, cz, hx, hy, hz in boxes:
-        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, pos=[cx, cy, cz],
-                                size=[hx, hy, hz], contype=0, conaffinity=1)
-    for px, py, pz in zip(x, y, top + 0.03, strict=True):
-        body = spec.worldbody.add_body(pos=[px, py, pz])
-        body.add_freejoint()
-        body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.022, 0, 0], mass=0.2,
-                      contype=1, conaffinity=0, friction=[0.8, 0.02, 0.01],
-                      solref=[0.02, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2.0])
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    data.qvel.reshape(-1, 6)[:, 0] = 2.0  # a foot swinging into the riser
-    data.qvel.reshape(-1, 6)[:, 2] = -6.0  # and landing fast
-    data.xfrc_applied[1:, 0] = 5.0
-    data.xfrc_applied[1:, 2] = -20.0  # the leg pressing it down and forward
-    for _ in range(60):
-        mujoco.mj_step(model, data)
-    p = data.qpos.reshape(-1, 7)[:, :3]
+    # a foot swinging into the riser and landing fast, the leg pressing it down and forward
+    p = _stamp_feet(boxes, x, y, top + 0.03, velocity=(2.0, -6.0), push=(5.0, -20.0), steps=60)
     assert np.all(p[:, 0] < face)  # still before the riser
     assert np.all(p[:, 2] - top > 0.015)  # on the tread, ~2 mm deep (measured 0.019-0.020)
