@@ -17,7 +17,7 @@
 # matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper
 # (issue 21: stage 2 as the paper has it, SEED=N), straight-paper, l-shaped-paper, spiral-paper,
 # transfer-paper (RQ2 in the paper's setting), bench-options (issue 22: the speed of
-# physics between columns and the evaluation physics), pack; and on the host's CPUs beside the
+# physics between columns and the evaluation physics), warp (MuJoCo Warp's speed and success), pack; and on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
@@ -375,6 +375,20 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
       abl=(); [ -f "$pa" ] && abl=(--ablation "$pa")
       python3 -m mjx_stairs exp1-report --stage2 "$p2" "${abl[@]}" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
+    warp)  # issues 22 and 19: MuJoCo Warp (experiments/gpu/warp_physics.py). warp-lang's wheel
+      # (~149 MB) comes in three parts carried by three earlier calls on the same warm machine
+      # (.whl_warp_a, _b, _c: an ignored path a later call does not carry stays there); here they
+      # are joined and installed. WARP_CELLS (fidelity.CELLS indices) for the success table.
+      w=/tmp/warp_lang-1.19.0-py3-none-manylinux_2_28_x86_64.whl
+      cat .whl_warp_a/warp_lang.part.00 .whl_warp_b/warp_lang.part.01 \
+        .whl_warp_c/warp_lang.part.02 > $w || { echo "warp parts missing"; continue; }
+      python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site $w \
+        .whl_warp_c/mujoco_warp-*.whl >/dev/null 2>&1 || { echo "warp install failed"; continue; }
+      mkdir -p "$OUT/warp"
+      python3 experiments/gpu/warp_physics.py rate "$OUT/warp/rate_4096.json" --robots 4096 \
+        2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit"
+      python3 experiments/gpu/warp_physics.py success "$OUT/warp/success.json" --robots 1000 \
+        --cells "${WARP_CELLS:-8,9,15,16,3,5}" 2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit" ;;
     pack)  # only 8 files of at most 16 MiB come back from a device command: one tar per output
       # folder, cut in 15 MiB parts (NAME.tar.00, .01: cat them back together) where larger; the
       # background jobs' output first

@@ -208,9 +208,12 @@ def _mjx_vertical_force(env: envlib.StairEnv, data) -> jax.Array:
 def first_second(
     policy: Policy, spec: CellSpec, options: dict[str, Sequence[str]], warmup_s: float = 2.0,
     horizon_s: float = 1.0, solver: bw.SolverConfig = bw.DEFAULT_SOLVER,
+    replays: dict[str, Callable] | None = None,
 ) -> dict[str, Any]:
     """From the same states on the stairs, the same actions for `horizon_s` in the ground truth
     and in each MJX option ({name: env overrides}): base position error and contact force.
+    `replays` ({name: fn(policy, spec, start, actions) -> (pos, force, done)}, as
+    `replay_in_mjx`) adds other simulators (e.g. MuJoCo Warp) beside the options.
 
     The starting states: the spec's robots after `warmup_s` of the policy in the ground truth.
     The actions: the policy's, closed-loop in the ground truth; each MJX option replays them
@@ -249,9 +252,11 @@ def first_second(
     out = {"robots": len(robots), "warmup_s": warmup_s, "horizon_s": horizon_s,
            "cell": {"family": cell[0], "schedule": cell[1], "level": cell[2] + 1},
            "gt_mean_vertical_force_n": float(gt_force.mean()), "options": {}}
-    for name, overrides in options.items():
-        pos, force, done = replay_in_mjx(policy, dataclasses.replace(spec, env_overrides=tuple(
-            overrides)), start, actions)
+    runs = {name: (tuple(o), replay_in_mjx) for name, o in options.items()}
+    runs.update({name: ((), fn) for name, fn in (replays or {}).items()})
+    for name, (overrides, replay) in runs.items():
+        pos, force, done = replay(policy, dataclasses.replace(spec, env_overrides=overrides),
+                                  start, actions)
         # A robot whose MJX episode ended (a fall) is reset by the env: compared until then.
         ended = np.cumsum(done, axis=0) > 0  # [T, B]
         err = np.where(ended, np.nan, np.linalg.norm(pos - gt_pos, axis=-1))  # [T, B]
