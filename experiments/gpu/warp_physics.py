@@ -187,18 +187,20 @@ def run_first(out: Path, robots: int, cells: list[int], policies: str | None) ->
     from mjx_stairs.study.evaluate import CellSpec, cell_env, initial_states
 
     def replay(policy, spec, start, actions):
+        """As ground_truth.replay_in_mjx: positions, forces (not measured: NaN) and the
+        episode ends by the evaluation's fall rule."""
         env = cell_env(policy, spec)
-        initial_states(env, spec)
+        state = initial_states(env, spec)
+        goal = np.asarray(env.goals)[np.asarray(state.info["tile"])]
         qpos, qvel, _ = start
         batch = WarpBatch(env, qpos, qvel)
         c = env.config
-        pos = []
+        pos, done = [], []
         for a in actions:
             batch.step(rb.NOMINAL_JOINT_POS + c.robot.action_scale * a, c.decimation)
             pos.append(batch.qpos[:, :3])
-        n = len(actions)
-        return np.array(pos), np.full((n, qpos.shape[0]), np.nan), np.zeros((n, qpos.shape[0]),
-                                                                            bool)
+            done.append(gt._endings(env, batch.qpos, batch.qvel, goal)[1])
+        return np.array(pos), np.full((len(actions), qpos.shape[0]), np.nan), np.array(done)
 
     rec = {"policies": {}}
     for name, policy in _policies(policies).items():

@@ -268,11 +268,17 @@ def first_second(
             "pos_error_at_horizon_mean_m": float(np.nanmean(err[-1])),
             "pos_error_at_horizon_p90_m": float(np.nanpercentile(err[-1], 90)),
             "pos_error_at_horizon_max_m": float(np.nanmax(err[-1])),
-            "force_abs_diff_mean_n": float(np.nanmean(df)),
-            "mean_vertical_force_n": float(np.nanmean(np.where(ended, np.nan, force))),
+            "force_abs_diff_mean_n": _nanmean(df),
+            "mean_vertical_force_n": _nanmean(np.where(ended, np.nan, force)),
             "episodes_ended_in_mjx": int(ended[-1].sum()),
         }
     return out
+
+
+def _nanmean(x: np.ndarray) -> float | None:
+    """The mean of the finite entries; None where there are none (a replay without forces)."""
+    x = np.asarray(x, np.float64)
+    return float(np.nanmean(x)) if np.isfinite(x).any() else None
 
 
 def replay_in_mjx(policy: Policy, spec: CellSpec, start, actions):
