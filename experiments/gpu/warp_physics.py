@@ -60,8 +60,8 @@ def warp_model(env) -> mujoco.MjModel:
 
 
 class WarpBatch:
-    """N robots stepped by MuJoCo Warp, the interface of `box_world.Batch` (qpos, qvel, step,
-    close), so `ground_truth.closed_loop` runs the policy on it."""
+    """N robots stepped by MuJoCo Warp, with what `ground_truth.closed_loop` uses of
+    `box_world.Batch` (qpos, qvel, step), so the policy runs on it as on the ground truth."""
 
     def __init__(self, env, qpos: np.ndarray, qvel: np.ndarray | None = None):
         m = warp_model(env)
@@ -105,9 +105,6 @@ class WarpBatch:
         self.data = self._step(self.data, jnp.asarray(q_target, jnp.float32),
                                jnp.asarray(on), substeps)
 
-    def close(self) -> None:
-        pass
-
 
 def _policies(names: str | None):
     from mjx_stairs.rl.policy import load_policy
@@ -131,25 +128,12 @@ def run_rate(out: Path, robots: int, steps: int, repeats: int, config: str,
            "mujoco": mujoco.__version__}
     data = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), robots))
     batch = WarpBatch(env, np.asarray(data.pipeline_state.qpos))
-    limit = jnp.asarray(rb.TORQUE_LIMIT) * 0.3
-    dec, mx = env.config.decimation, batch.mx
-
-    def policy_step(carry, _):
-        d, k = carry
-        k, sub = jax.random.split(k)
-        tau = jax.random.uniform(sub, (robots, 12), minval=-1.0, maxval=1.0) * limit
-        d = jax.lax.scan(lambda x, _: (jax.vmap(lambda y, t: mjx.step(mx, y.replace(ctrl=t)))(
-            x, tau), None), d, None, length=dec)[0]
-        return (d, k), None
-
-    fn = lambda c: jax.lax.scan(policy_step, c, None, length=steps)[0]
-    compile_s, run_s, final = bench._time(fn, (batch.data, jax.random.PRNGKey(1)), repeats)
-    fell = float(jnp.mean(final[0].qpos[:, 2] < 0.0))
-    rec["warp"] = {"compile_s": compile_s, "steps_per_s": robots * steps / run_s,
-                   "nacon_last": int(np.asarray(final[0]._impl.nacon).max()),
-                   "share_below_floor": fell}
+    rec["warp"] = bench.bench_physics(env, robots, steps, repeats, mesh, batch.mx, batch.data)
+    final = rec["warp"].pop("data")
+    rec["warp"]["nacon_last"] = int(np.asarray(final._impl.nacon).max())
     print(f"[warp] {rec['warp']}", flush=True)
     rec["jax"] = bench.bench_physics(env, robots, steps, repeats, mesh)
+    rec["jax"].pop("data")
     print(f"[jax] {rec['jax']}", flush=True)
     _write(out, rec)
 

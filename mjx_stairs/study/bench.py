@@ -65,12 +65,16 @@ def _reset(env, robots: int, mesh):
     return jax.jit(jax.vmap(env.reset), out_shardings=batched(mesh))(keys)
 
 
-def bench_physics(env, robots: int, steps: int, repeats: int, mesh) -> dict[str, float]:
-    """(a) MJX physics only, random torques within the limits, robots split over the mesh."""
-    mx = env.robot.mjx_model
+def bench_physics(env, robots: int, steps: int, repeats: int, mesh, model=None,
+                  data=None) -> dict[str, Any]:
+    """(a) MJX physics only, random torques within the limits, robots split over the mesh.
+    `model` / `data` (batched): another MJX model and its robots' data on the env's atlas (e.g.
+    MuJoCo Warp's, experiments/gpu/warp_physics.py); default the env's, reset. The last
+    data is returned under "data"."""
+    mx = env.robot.mjx_model if model is None else model
     limit = jnp.asarray(rb.TORQUE_LIMIT)
     dec = env.config.decimation
-    data = _reset(env, robots, mesh).pipeline_state
+    data = _reset(env, robots, mesh).pipeline_state if data is None else data
 
     def policy_step(carry, _):
         d, k = carry
@@ -87,7 +91,7 @@ def bench_physics(env, robots: int, steps: int, repeats: int, mesh) -> dict[str,
     fn = lambda c: jax.lax.scan(policy_step, c, None, length=steps)[0]
     compile_s, run_s, out = _time(fn, (data, _key(mesh)), repeats)
     return {"compile_s": compile_s, "steps_per_s": robots * steps / run_s,
-            "devices_used": _spread(out)}
+            "devices_used": _spread(out), "data": out[0]}
 
 
 def bench_env(env, robots: int, steps: int, repeats: int, mesh) -> dict[str, float]:
@@ -215,6 +219,7 @@ def measure(config: ExperimentConfig, env, robots: int, mesh, parts: tuple[str, 
     cfg = dataclasses.replace(config, train=dataclasses.replace(config.train, num_envs=robots))
     if "physics" in parts:
         row["physics"] = bench_physics(env, robots, steps, repeats, mesh)
+        row["physics"].pop("data")
     if "env" in parts:
         row["env"] = bench_env(env, robots, steps, repeats, mesh)
     if "rollout" in parts:
