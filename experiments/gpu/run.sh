@@ -376,14 +376,15 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
       python3 -m mjx_stairs exp1-report --stage2 "$p2" "${abl[@]}" --out "$OUT/exp1" 2>&1 \
         | grep -v warp ;;
     warp)  # issues 22 and 19: MuJoCo Warp (experiments/gpu/warp_physics.py). warp-lang's wheel
-      # (~149 MB) comes in three parts carried by three earlier calls on the same warm machine
-      # (.whl_warp_a, _b, _c: an ignored path a later call does not carry stays there); here they
-      # are joined and installed. WARP_CELLS (fidelity.CELLS indices) for the success table.
+      # (~149 MB) comes in four parts carried by four earlier calls on the same warm machine
+      # (.whl_warp_a .. _d, each ~37 MB beside the ~18 MB tree: an ignored path a later call does
+      # not carry stays there); here they are joined and installed. WARP_CELLS (fidelity.CELLS indices) for the success table.
       w=/tmp/warp_lang-1.19.0-py3-none-manylinux_2_28_x86_64.whl
       cat .whl_warp_a/warp_lang.part.00 .whl_warp_b/warp_lang.part.01 \
-        .whl_warp_c/warp_lang.part.02 > $w || { echo "warp parts missing"; continue; }
+        .whl_warp_c/warp_lang.part.02 .whl_warp_d/warp_lang.part.03 > $w \
+        || { echo "warp parts missing"; continue; }
       python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site $w \
-        .whl_warp_c/mujoco_warp-*.whl >/dev/null 2>&1 || { echo "warp install failed"; continue; }
+        .whl_warp_d/mujoco_warp-*.whl >/dev/null 2>&1 || { echo "warp install failed"; continue; }
       mkdir -p "$OUT/warp"
       python3 experiments/gpu/warp_physics.py rate "$OUT/warp/rate_4096.json" --robots 4096 \
         2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit"
