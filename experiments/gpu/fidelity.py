@@ -44,6 +44,9 @@ OPTIONS = {  # env overrides of each physics option
     "columns_converged": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
                           "robot.solver_iterations=8", "robot.ls_iterations=10"),
     "evaluation": ("robot.physics=evaluation",),  # the named preset: columns_converged
+    # the same, a sunk sphere centre pushed out through the nearest exposed face of its column
+    # (issue 19, experiments/gt_sunk_exit.py): step fidelity with FIDELITY_OPTIONS=evaluation_exit
+    "evaluation_exit": ("robot.physics=evaluation", "robot.sunk_exit=nearest"),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
     # (8): is a few iterations' convergence enough? Their speed: run.sh step bench-options.
     "columns_n2": ("robot.terrain_contacts=columns", "robot.shin_collision=true",

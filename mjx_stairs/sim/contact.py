@@ -145,7 +145,7 @@ def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
 
 
-def sphere_columns(h, s, subgrid_size: tuple[int, int]):
+def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top"):
     """(dist [NCON], pos [NCON, 3], frame [NCON, 3, 3]) of one sphere against the heightfield's
     grid read as columns, as `terrains.boxes.grid_boxes` builds the ground truth: grid point
     (ix, iy) owns the square cell around it (half a spacing each way), a flat-topped column from
@@ -155,7 +155,10 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int]):
     of an axis-aligned box is the centre clamped to it. The first contact is the nearest column,
     the second the nearest column in front of the first contact's plane (the riser of a concave
     corner), as in `sphere_heightfield`. A centre inside a column (the sphere sunk deeper than
-    its radius) is pushed out through that column's top.
+    its radius) is pushed out through that column's top (``sunk_exit="top"``: right for a foot
+    sunk into a tread, but a foot driven into a riser is lifted onto the step above), or through
+    its nearest exposed face (``"nearest"``: the top, or a side whose neighbouring column stands
+    lower than the centre), as MuJoCo's box pushes it (issue 19, docs/results.md section 5b).
     """
     r = s.size[0]
     p = h.mat.T @ (s.pos - h.pos)
@@ -190,9 +193,15 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int]):
     up = jnp.array([0.0, 0.0, 1.0])
     depth = top[k_in] - p[2]
     q_in = jnp.stack([p[0], p[1], top[k_in]])
+    n_in = up
+    if sunk_exit == "nearest":
+        depth, n_in = _nearest_exit(h, p, ci[k_in], ri[k_in], lo[k_in], hi[k_in])
+        q_in = p + depth * n_in
+    elif sunk_exit != "top":
+        raise ValueError(f"sunk_exit must be 'top' or 'nearest', got {sunk_exit!r}")
     dist1 = jnp.where(sunk, -depth - r, dist1)
-    n1 = jnp.where(sunk, up, n1)
-    pos1 = jnp.where(sunk, q_in + 0.5 * (-depth - r) * up, pos1)
+    n1 = jnp.where(sunk, n_in, n1)
+    pos1 = jnp.where(sunk, q_in + 0.5 * (-depth - r) * n_in, pos1)
     q1 = jnp.where(sunk, q_in, q[k1])
     ahead = (q - q1) @ n1 > FRONT * r
     k2 = jnp.argmin(jnp.where(ahead, d, jnp.inf))
@@ -204,20 +213,52 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int]):
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
 
 
+def _nearest_exit(h, p, ix, iy, lo, hi):
+    """(depth, outward normal) of the nearest exposed face of column (ix, iy) [lo, hi] holding
+    the centre p: its top, or a side whose neighbouring column (or the grid's edge) lies lower
+    than p (a side against a column at least as high is inside the solid)."""
+    ncol, nrow = h.ncol, h.nrow
+
+    def below(jx, jy):
+        inside = (jx >= 0) & (jx < ncol) & (jy >= 0) & (jy < nrow)
+        z = h.data[jnp.clip(jx, 0, ncol - 1), jnp.clip(jy, 0, nrow - 1)] * h.size[2]
+        return ~inside | (z < p[2])
+
+    depth = jnp.stack([hi[2] - p[2], p[0] - lo[0], hi[0] - p[0], p[1] - lo[1], hi[1] - p[1]])
+    open_ = jnp.stack([jnp.array(True), below(ix - 1, iy), below(ix + 1, iy), below(ix, iy - 1),
+                       below(ix, iy + 1)])
+    normals = jnp.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0],
+                         [0.0, 1.0, 0.0]])
+    j = jnp.argmin(jnp.where(open_, depth, jnp.inf))
+    return depth[j], normals[j]
+
+
+def sphere_columns_nearest_exit(h, s, subgrid_size: tuple[int, int]):
+    """`sphere_columns` with ``sunk_exit="nearest"``."""
+    return sphere_columns(h, s, subgrid_size, sunk_exit="nearest")
+
+
 COLUMNS_HFIELD = "terrain_columns"
-"""The heightfield asset name that selects `sphere_columns` (any other name: the nearest-point
-surface collider). MJX keys collision functions by geom types only, and both colliders collide
-(heightfield, ellipsoid) pairs, so the one registered function dispatches on the asset's name."""
+"""The heightfield asset name that selects `sphere_columns` (any other name but the next: the
+nearest-point surface collider). MJX keys collision functions by geom types only, and the
+colliders all collide (heightfield, ellipsoid) pairs, so the one registered function dispatches
+on the asset's name."""
+
+COLUMNS_EXIT_HFIELD = "terrain_columns_exit"
+"""The heightfield asset name that selects `sphere_columns_nearest_exit`."""
 
 _NEAREST = collision_convex.collider(ncon=NCON)(sphere_heightfield)
-_COLUMNS = collision_convex.collider(ncon=NCON)(sphere_columns)
+_BY_NAME = {
+    COLUMNS_HFIELD: collision_convex.collider(ncon=NCON)(sphere_columns),
+    COLUMNS_EXIT_HFIELD: collision_convex.collider(ncon=NCON)(sphere_columns_nearest_exit),
+}
 KEY = (GeomType.HFIELD, GeomType.ELLIPSOID)
 
 
 def _collide(m, d, key, geom):
     """MJX's collision function for KEY: columns or the nearest-point surface, by asset name."""
     name = support.id2name(m, mujoco.mjtObj.mjOBJ_HFIELD, int(key.data_ids[0]))
-    return (_COLUMNS if name == COLUMNS_HFIELD else _NEAREST)(m, d, key, geom)
+    return _BY_NAME.get(name, _NEAREST)(m, d, key, geom)
 
 
 _collide.ncon = NCON

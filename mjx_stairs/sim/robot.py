@@ -84,12 +84,20 @@ class RobotConfig:
     # "columns" (the same, against the grid as flat-topped columns with vertical risers: the
     # geometry of the CPU MuJoCo ground truth, terrains.boxes).
     terrain_contacts: Literal["mjx", "nearest", "columns"] = "mjx"
+    # "columns" only: a sphere centre inside a column leaves through the column's top ("top", the
+    # evaluation physics as published) or its nearest exposed face ("nearest", as MuJoCo's boxes
+    # push it: a foot driven into a riser goes back out of the riser, not up onto the step).
+    # Not set by the physics presets.
+    sunk_exit: Literal["top", "nearest"] = "top"
     friction: float = 0.8  # foot-terrain sliding friction
     # N m s/rad on every leg joint (None: the MJCF's JOINT_DAMPING); e.g. evaluating at the Go2
     # description's 2: --env robot.joint_damping=2 (env.randomization.joint_damping draws it)
     joint_damping: float | None = None
 
     def __post_init__(self):
+        if self.sunk_exit not in ("top", "nearest"):
+            raise ConfigError("config key 'env.robot.sunk_exit': must be 'top' or 'nearest', got "
+                              f"{self.sunk_exit!r}")
         if self.joint_damping is not None and not self.joint_damping >= 0:
             raise ConfigError("config key 'env.robot.joint_damping': must be >= 0 or none, got "
                               f"{self.joint_damping}")
@@ -104,7 +112,8 @@ PHYSICS = {
                    "ls_iterations": 10},
 }
 """Physics presets, named by ``robot.physics = "..."`` in a config table or an override; each
-sets every physics field, so a preset means the same whatever came before it.
+sets the collider, shin and solver fields, so a preset means the same whatever came before it
+(``sunk_exit`` is left as it is).
 "reference": MJX's heightfield collider, shin spheres, 1 Newton iteration with 5 line-search
 steps (the defaults above; what the published tables up to issue 19 were measured in);
 "lean": the fast training physics of issue 7 (no mid-shin spheres, 3 line-search steps, the
@@ -179,8 +188,9 @@ def build_mj_model(
     if not np.all(np.isfinite(heights)):
         raise ValueError("heights contain NaN or infinite values")
     columns = config.terrain_contacts == "columns"
+    name = contact.COLUMNS_EXIT_HFIELD if config.sunk_exit == "nearest" else contact.COLUMNS_HFIELD
     add_heightfield(spec, heights, resolution, config.friction,
-                    hfield_name=contact.COLUMNS_HFIELD if columns else "terrain")
+                    hfield_name=name if columns else "terrain")
     for name in SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
     set_joint_damping(spec, config)

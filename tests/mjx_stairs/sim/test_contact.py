@@ -263,3 +263,46 @@ def test_columns_collider_is_the_distance_to_the_ground_truth_boxes():
         assert d[0] < 0 and d[1] > 0.5
     # MJX finds the columns collider through the heightfield's asset name.
     assert mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_HFIELD, 0) == contact.COLUMNS_HFIELD
+
+
+def test_columns_sunk_centre_leaves_by_the_top_or_the_nearest_exposed_face():
+    """A centre inside a column: "top" pushes it up through the column's top; "nearest" out
+    through the nearest exposed face (issue 19: a foot driven into a riser goes back out of the
+    riser, as MuJoCo's boxes push it). Sunk into a tread, both push it up; a side against a
+    higher neighbour is never an exit."""
+    res = 0.025
+    x = np.arange(64) * res
+    heights = np.tile(0.16 * (x >= 0.8) + 0.16 * (x >= 1.1), (24, 1)).astype(np.float32)
+    m = rb.build_mj_model(heights, res, rb.RobotConfig(terrain_contacts="columns",
+                                                       sunk_exit="nearest"))
+    assert mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_HFIELD, 0) == contact.COLUMNS_EXIT_HFIELD
+    mx = mjx.put_model(m)
+    hid = m.geom("terrain").id
+    info = mesh.hfield(mx, int(m.geom_dataid[hid])).replace(
+        pos=jnp.asarray(m.geom_pos[hid]), mat=jnp.eye(3))
+    r = 0.022
+
+    def collide(p, exit_):
+        d, _, frame = contact.sphere_columns(info, GeomInfo(jnp.asarray(p), jnp.eye(3),
+                                                            jnp.full(3, r)), (4, 4), exit_)
+        return float(d[0]), np.asarray(frame[0, 0]), float(d[1])
+
+    riser = [1.0875 + 0.005, 0.3, 0.20]  # 5 mm into the second step's riser, 12 cm under its top
+    d, n, d2 = collide(riser, "top")
+    np.testing.assert_allclose([d, *n], [-(0.32 - 0.20) - r, 0, 0, 1], atol=1e-5)
+    d, n, d2 = collide(riser, "nearest")
+    np.testing.assert_allclose([d, *n], [-0.005 - r, -1, 0, 0], atol=1e-5)
+    assert d2 > 0.5  # one contact for a sunk centre
+    # 12 mm into the first step's riser and 1 cm under its top: the top is the nearer exit.
+    d, n, _ = collide([0.7875 + 0.012, 0.3, 0.15], "nearest")
+    np.testing.assert_allclose([d, *n], [-0.01 - r, 0, 0, 1], atol=1e-5)
+    # Deep in the first step, 6 cm from its riser and 2 cm under its top: up in both.
+    for exit_ in ("top", "nearest"):
+        d, n, _ = collide([0.95, 0.3, 0.14], exit_)
+        np.testing.assert_allclose([d, *n], [-0.02 - r, 0, 0, 1], atol=1e-5)
+    # 5 mm into the second step's riser, 2 mm from its cell's y side: that side faces a column
+    # as high (inside the solid), so the riser is the exit.
+    d, n, _ = collide([1.0875 + 0.005, 0.2875 + 0.002, 0.30], "nearest")
+    np.testing.assert_allclose([d, *n], [-0.005 - r, -1, 0, 0], atol=1e-5)
+    with pytest.raises(Exception, match="sunk_exit"):
+        rb.RobotConfig(terrain_contacts="columns", sunk_exit="side")
