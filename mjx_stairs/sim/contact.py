@@ -190,15 +190,8 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top"):
 
     k1 = jnp.argmin(d)
     dist1, pos1, n1 = contact(k1)
-    up = jnp.array([0.0, 0.0, 1.0])
-    depth = top[k_in] - p[2]
-    q_in = jnp.stack([p[0], p[1], top[k_in]])
-    n_in = up
-    if sunk_exit == "nearest":
-        depth, n_in = _nearest_exit(h, p, ci[k_in], ri[k_in], lo[k_in], hi[k_in])
-        q_in = p + depth * n_in
-    elif sunk_exit != "top":
-        raise ValueError(f"sunk_exit must be 'top' or 'nearest', got {sunk_exit!r}")
+    depth, n_in = _exit_face(h, p, ci[k_in], ri[k_in], lo[k_in], hi[k_in], sunk_exit)
+    q_in = p + depth * n_in
     dist1 = jnp.where(sunk, -depth - r, dist1)
     n1 = jnp.where(sunk, n_in, n1)
     pos1 = jnp.where(sunk, q_in + 0.5 * (-depth - r) * n_in, pos1)
@@ -213,10 +206,16 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top"):
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
 
 
-def _nearest_exit(h, p, ix, iy, lo, hi):
-    """(depth, outward normal) of the nearest exposed face of column (ix, iy) [lo, hi] holding
-    the centre p: its top, or a side whose neighbouring column (or the grid's edge) lies lower
-    than p (a side against a column at least as high is inside the solid)."""
+def _exit_face(h, p, ix, iy, lo, hi, sunk_exit: str):
+    """(depth, outward normal) of the face through which a centre p inside column (ix, iy)
+    [lo, hi] leaves: its top ("top"), or its nearest exposed face ("nearest": the top, or a side
+    whose neighbouring column, or the grid's edge, lies lower than p; a side against a column at
+    least as high is inside the solid)."""
+    up = jnp.array([0.0, 0.0, 1.0])
+    if sunk_exit == "top":
+        return hi[2] - p[2], up
+    if sunk_exit != "nearest":
+        raise ValueError(f"sunk_exit must be 'top' or 'nearest', got {sunk_exit!r}")
     ncol, nrow = h.ncol, h.nrow
 
     def below(jx, jy):
