@@ -222,9 +222,10 @@ for step in "$@"; do
     # issue 22: the physics-only and training rates (4096 robots, stage2_u.toml's U atlas) of
     # the candidate physics between "columns" and the evaluation physics (fidelity.py's
     # columns_n2, columns_n3, columns_n4, columns_noshin_n3; BENCH_OPTIONS to choose), beside
-    # the evaluation physics itself; their fidelity: step fidelity with FIDELITY_OPTIONS=...
+    # the evaluation physics itself and evaluation_exit (issue 19's sunk-exit rule: its cost);
+    # their fidelity: step fidelity with FIDELITY_OPTIONS=...
     bench-options)
-      for opt in ${BENCH_OPTIONS:-evaluation columns_n2 columns_n3 columns_n4 columns_noshin_n3}; do
+      for opt in ${BENCH_OPTIONS:-evaluation evaluation_exit columns_n2 columns_n3 columns_n4 columns_noshin_n3}; do
         [ "$(left)" -lt 120 ] && { echo "no time left for $opt"; break; }
         ov=$(python3 -c "import sys; sys.path.insert(0, 'experiments/gpu'); import fidelity; \
 print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
