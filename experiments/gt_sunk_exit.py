@@ -30,7 +30,7 @@ def main(rule: str, robots: int, cell: int, pol: str) -> None:
     r = success_by_cell({pol: load_policy(POLICIES[pol])}, spec)[pol]
     print(json.dumps(dict(rule=rule, cell=list(CELLS[cell]), policy=pol, robots=robots,
                           success=r["success"], fell=r["fell"],
-                          wall_s=round(time.time() - t0))))
+                          wall_s=round(time.time() - t0), outcomes=r["outcomes"])))
 
 
 if __name__ == "__main__":

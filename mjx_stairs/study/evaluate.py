@@ -173,13 +173,23 @@ def initial_states(env: StairEnv, spec: CellSpec):
     return jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
 
 
+def outcome_strings(success: np.ndarray, fell: np.ndarray, cells: int) -> list[str]:
+    """Every robot's outcome, one string per cell of [cells * robots] robots: "s" succeeded,
+    "f" fell, "-" neither (timed out). For paired comparisons of two physics from the same
+    starts, where most episodes come out alike."""
+    code = np.where(np.asarray(success, bool), "s", np.where(np.asarray(fell, bool), "f", "-"))
+    return ["".join(row) for row in code.reshape(cells, -1)]
+
+
 def cell_records(spec: CellSpec, success: np.ndarray, fell: np.ndarray, **extra) -> dict:
-    """Per-cell success and falls of [cells * robots] outcomes, as a JSON-ready dict."""
+    """Per-cell success and falls of [cells * robots] outcomes, as a JSON-ready dict, with every
+    robot's outcome (`outcome_strings`)."""
     shape = (len(spec.cells), spec.robots_per_cell)
     return {
         "cells": [{"family": f, "schedule": s, "level": lv + 1} for f, s, lv in spec.cells],
         "success": [float(v) for v in np.asarray(success).reshape(shape).mean(1)],
         "fell": [float(v) for v in np.asarray(fell).reshape(shape).mean(1)],
+        "outcomes": outcome_strings(success, fell, len(spec.cells)),
         "robots_per_cell": spec.robots_per_cell,
         "episode_length_s": spec.episode_length_s,
         "seed": spec.seed,

@@ -146,6 +146,21 @@ def test_case_record_counts_timeouts_and_time_to_goal():
     assert r["mean_time_to_goal_s"] == pytest.approx(0.3)
 
 
+def test_cell_records_keep_every_robots_outcome_in_cell_order():
+    """cell_records: per cell, one character per robot (s / f / -) whose counts are the cell's
+    success and fall rates, cells in row-major order of the [cells * robots] outcomes."""
+    from mjx_stairs.study.evaluate import CellSpec, cell_records
+
+    spec = CellSpec(cells=(("straight", "test", 0), ("u_shaped", "test", 5)),
+                    robots_per_cell=4)
+    success = np.array([1, 0, 0, 1, 0, 0, 0, 1], bool)
+    fell = np.array([0, 1, 0, 0, 1, 1, 0, 0], bool)
+    r = cell_records(spec, success, fell)
+    assert r["outcomes"] == ["sf-s", "ff-s"]
+    assert r["success"] == [0.5, 0.25] and r["fell"] == [0.25, 0.5]
+    assert [c["level"] for c in r["cells"]] == [1, 6]
+
+
 def test_eval_direction_down_walks_the_family_from_the_top():
     """eval --direction down: the same tiles, robots spawned on the top landing, goal below."""
     from mjx_stairs.rl.policy import load_policy
