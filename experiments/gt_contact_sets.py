@@ -29,11 +29,8 @@ from mjx_stairs.study.evaluate import cell_env
 sys.path.insert(0, "experiments")
 sys.path.insert(0, "experiments/gpu")
 from fidelity import OPTIONS, POLICIES  # noqa: E402
-from gt_uturn_probe import spec_of  # noqa: E402
-
-
-def ncls(nz: float) -> str:
-    return "vert" if abs(nz) > 0.9 else ("horiz" if abs(nz) < 0.1 else "edge")
+from gt_uturn_probe import ended, robot_and_box, robot_geoms, spec_of  # noqa: E402
+from gt_uturn_probe import normal_class as ncls  # noqa: E402
 
 
 def main() -> None:
@@ -62,8 +59,8 @@ def main() -> None:
         q = d["qpos"][k]
         dist, geom, frame = (np.asarray(x) for x in columns(jnp.asarray(q, jnp.float32)))
         for b in range(B):
-            if k > 0 and np.allclose(d["qpos"][k, b], d["qpos"][k - 1, b]):
-                continue  # the episode has ended
+            if ended(d["qpos"], k, b):
+                continue
             model = models[b]
             dd = mujoco.MjData(model)
             dd.qpos[:] = q[b]
@@ -73,14 +70,12 @@ def main() -> None:
                 c = dd.contact[i]
                 if c.dist >= 0:
                     continue
-                g1, g2 = model.geom(c.geom1).name, model.geom(c.geom2).name
-                robot, box = (g2, c.geom1) if g1.startswith("stair") else (g1, c.geom2)
+                robot, box = robot_and_box(model, c)
                 g[robot, ncls(c.frame[2])] += 1
                 gl.setdefault(robot, []).append((ncls(c.frame[2]), round(float(c.dist), 4),
                                                  model.geom(box).name))
             for i in np.flatnonzero(dist[b] < 0):
-                gg = [names[j] for j in geom[b, i]
-                      if mm.geom_type[j] != mujoco.mjtGeom.mjGEOM_HFIELD]
+                gg = robot_geoms(mm, names, geom[b, i])
                 if len(gg) != 1:
                     continue
                 x[gg[0], ncls(frame[b, i][0, 2])] += 1

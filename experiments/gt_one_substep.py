@@ -22,7 +22,7 @@ from mujoco import mjx
 sys.path.insert(0, "experiments")
 sys.path.insert(0, "experiments/gpu")
 from fidelity import OPTIONS, POLICIES  # noqa: E402
-from gt_uturn_probe import spec_of  # noqa: E402
+from gt_uturn_probe import ended, robot_and_box, robot_geoms, spec_of  # noqa: E402
 
 from mjx_stairs.rl.policy import load_policy  # noqa: E402
 from mjx_stairs.sim import box_world as bw  # noqa: E402
@@ -63,8 +63,7 @@ for k in range(0, d["action"].shape[0], every):
         for i in range(dd.ncon):
             cc = dd.contact[i]
             mujoco.mj_contactForce(m, dd, i, f6)
-            g1, g2 = m.geom(cc.geom1).name, m.geom(cc.geom2).name
-            rob = g2 if g1.startswith("stair") else g1
+            rob = robot_and_box(m, cc)[0]
             cl.append((rob, round(float(cc.dist), 4), np.round(cc.frame[:3], 2).tolist(), round(float(f6[0]), 1)))
         gcon.append((cl, dd.qfrc_constraint[:3].copy()))
         mujoco.mj_step(m, dd)
@@ -72,12 +71,12 @@ for k in range(0, d["action"].shape[0], every):
     out = mstep(jnp.asarray(q, jnp.float32), jnp.asarray(v, jnp.float32), jnp.asarray(tau, jnp.float32))
     xv, dist, geom, frame, addr, efc, qfc = (np.asarray(x) for x in out)
     for b in range(B):
-        if k > 0 and np.allclose(d["qpos"][k, b], d["qpos"][k - 1, b]):
+        if ended(d["qpos"], k, b):
             continue
         err = float(np.linalg.norm(xv[b, :3] - gv[b, :3]))
         xl = []
         for i in np.flatnonzero(dist[b] < 0):
-            gg = [names[j] for j in geom[b, i] if mm.geom_type[j] != mujoco.mjtGeom.mjGEOM_HFIELD]
+            gg = robot_geoms(mm, names, geom[b, i])
             fn = float(efc[b, addr[b, i]: addr[b, i] + 4].sum()) if addr[b, i] >= 0 else np.nan
             xl.append((gg[0] if gg else "?", round(float(dist[b, i]), 4), np.round(frame[b, i][0], 2).tolist(), round(fn, 1)))
         rows.append((err, k, b, gcon[b], xl, gv[b, :3], xv[b, :3], qfc[b, :3]))

@@ -10,20 +10,14 @@ Usage: python experiments/gt_sunk_exit_table.py experiments/results/ground_truth
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent / "gpu"))
 
 
-def _interval(p: float, n: int) -> float:
-    """Half-width of the 95 % interval of a success rate p over n episodes, in points."""
-    return 100 * 1.96 * math.sqrt(max(p * (1 - p), 1e-4) / n)
-
-
 def main(root: Path, files: list[Path]) -> None:
-    from fidelity_table import _ground_truth
+    from fidelity_table import _ground_truth, interval
 
     gt = _ground_truth(root)
     published = json.loads((root / "mjx_eval" / "mjx_evaluation.json").read_text())["policies"]
@@ -50,7 +44,7 @@ def main(root: Path, files: list[Path]) -> None:
             cols.append("" if s is None else
                         f"{100 * s[0]:.1f} ({100 * (s[0] - g):+.1f}, n {s[1]})")
         name = f"{family} {schedule} L{level}"  # 1-based, as the fidelity table
-        print(f"| {policy} | {name} | {100 * g:.1f} ±{_interval(g, n):.1f} ({n}) | "
+        print(f"| {policy} | {name} | {100 * g:.1f} ±{interval(g, n):.1f} ({n}) | "
               + " | ".join(cols) + " |")
 
 

@@ -44,6 +44,28 @@ def spec_of(cell: int, robots: int, overrides=OPTIONS["reference"]) -> CellSpec:
     return CellSpec(cells=(CELLS[cell],), robots_per_cell=robots, env_overrides=overrides)
 
 
+def normal_class(nz: float) -> str:
+    """A contact normal's class: "vert" (tread-like, |n_z| > 0.9), "horiz" (riser-like,
+    |n_z| < 0.1) or "edge" (between)."""
+    return "vert" if abs(nz) > 0.9 else ("horiz" if abs(nz) < 0.1 else "edge")
+
+
+def robot_and_box(model: mujoco.MjModel, c) -> tuple[str, int]:
+    """(robot geom name, box geom id) of a ground-truth contact (boxes are named stair*)."""
+    g1, g2 = model.geom(c.geom1).name, model.geom(c.geom2).name
+    return (g2, c.geom1) if g1.startswith("stair") else (g1, c.geom2)
+
+
+def robot_geoms(mm: mujoco.MjModel, names: list[str], pair) -> list[str]:
+    """The names of an MJX contact's geoms that are not the heightfield."""
+    return [names[j] for j in pair if mm.geom_type[j] != mujoco.mjtGeom.mjGEOM_HFIELD]
+
+
+def ended(qpos: np.ndarray, k: int, b: int) -> bool:
+    """Whether robot b's recorded episode had ended by policy step k (its state held)."""
+    return k > 0 and np.allclose(qpos[k, b], qpos[k - 1, b])
+
+
 def gt_run(policy, spec, start=None, steps=None, solver=bw.DEFAULT_SOLVER):
     """The ground truth closed-loop (ground_truth.success_in_ground_truth with every step's
     state kept). start: (qpos, qvel, last_action) or None (the evaluation's spawns).
@@ -322,9 +344,8 @@ def cmd_contacts(a):
         f6 = np.zeros(6)
         for i in range(dd.ncon):
             c = dd.contact[i]
-            g1, g2 = m.geom(c.geom1).name, m.geom(c.geom2).name
-            robot = g2 if g1.startswith("stair") else g1
-            box = g1 if g1.startswith("stair") else g2
+            robot, box_id = robot_and_box(m, c)
+            box = m.geom(box_id).name
             mujoco.mj_contactForce(m, dd, i, f6)
             rows.setdefault(robot, []).append((box, round(float(c.dist), 4),
                                                np.round(c.frame[:3], 2).tolist(),

@@ -35,13 +35,10 @@ from mjx_stairs.study.evaluate import cell_env
 sys.path.insert(0, "experiments")
 sys.path.insert(0, "experiments/gpu")
 from fidelity import OPTIONS, POLICIES  # noqa: E402
-from gt_uturn_probe import spec_of  # noqa: E402
+from gt_uturn_probe import normal_class as ncls  # noqa: E402
+from gt_uturn_probe import robot_and_box, robot_geoms, spec_of  # noqa: E402
 
 ACTIVE = 1e-3  # m: a contact counts when its distance is below this
-
-
-def ncls(nz: float) -> str:
-    return "vert" if abs(nz) > 0.9 else ("horiz" if abs(nz) < 0.1 else "edge")
 
 
 def main(gt_path, mjx_path, out):
@@ -68,7 +65,7 @@ def main(gt_path, mjx_path, out):
         dist, geom, frame = (np.asarray(x) for x in mjx_contacts(jnp.asarray(q, jnp.float32)))
         rows = []
         for i in np.flatnonzero(dist < ACTIVE):
-            g = [names[x] for x in geom[i] if mm.geom_type[x] != mujoco.mjtGeom.mjGEOM_HFIELD]
+            g = robot_geoms(mm, names, geom[i])
             if len(g) != 1:
                 continue
             rows.append((g[0], ncls(frame[i][0, 2]), float(dist[i])))
@@ -84,8 +81,7 @@ def main(gt_path, mjx_path, out):
             c = dd.contact[i]
             if c.dist >= ACTIVE:
                 continue
-            g1, g2 = model.geom(c.geom1).name, model.geom(c.geom2).name
-            robot, box = (g2, c.geom1) if g1.startswith("stair") else (g1, c.geom2)
+            robot, box = robot_and_box(model, c)
             mujoco.mj_contactForce(model, dd, i, f6)
             top = float(model.geom_pos[box][2] + model.geom_size[box][2])
             rows.append((robot, ncls(c.frame[2]), float(c.dist), model.geom(box).name,

@@ -22,6 +22,11 @@ ORDER = ("reference", "lean", "nearest_full", "mjx_converged", "columns", "colum
 """Column order; options not named here (issue 22's candidates) follow in name order."""
 
 
+def interval(p: float, n: int) -> float:
+    """Half-width of the 95 % interval of a success rate p over n episodes, in points."""
+    return 100 * 1.96 * math.sqrt(max(p * (1 - p), 1e-4) / n)
+
+
 def _ground_truth(root: Path, before: bool = False) -> dict:
     gt = {}
     for folder in (("gt", "gt1000") if before else ("gt_supported", "gt_supported1000")):
@@ -66,7 +71,7 @@ def main(root: Path, before: bool = False) -> None:
                 if g is not None:
                     worst[o] = (worst[o][0], worst[o][1] + 1)
                     within[o] += abs(s - g) <= 0.03 + 1e-9
-            se = "" if g is None else f" ±{100 * 1.96 * math.sqrt(max(g * (1 - g), 1e-4) / n):.1f}"
+            se = "" if g is None else f" ±{interval(g, n):.1f}"
             gs = "–" if g is None else f"{100 * g:.1f}{se} ({n})"
             name = f"{c['family']} {c['schedule']} L{c['level']}"
             print(f"| {policy} | {name} | {gs} | " + " | ".join(cells) + " |")
