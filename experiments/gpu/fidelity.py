@@ -43,10 +43,12 @@ OPTIONS = {  # env overrides of each physics option
                 "robot.ls_iterations=5"),
     "columns_converged": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
                           "robot.solver_iterations=8", "robot.ls_iterations=10"),
-    "evaluation": ("robot.physics=evaluation",),  # the named preset: columns_converged
+    # the evaluation physics as published to 2026-11-24 (mjx_eval/): columns_converged
+    "evaluation": ("robot.physics=evaluation_top",),
     # the same, a sunk sphere centre pushed out through the nearest exposed face of its column
-    # (issue 19, experiments/gt_sunk_exit.py): step fidelity with FIDELITY_OPTIONS=evaluation_exit
-    "evaluation_exit": ("robot.physics=evaluation", "robot.sunk_exit=nearest"),
+    # (issue 19, experiments/gt_sunk_exit.py): the evaluation physics since 2026-11-25
+    # (mjx_evaluation_exit/), the preset robot.physics=evaluation
+    "evaluation_exit": ("robot.physics=evaluation",),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
     # (8): is a few iterations' convergence enough? Their speed: run.sh step bench-options.
     "columns_n2": ("robot.terrain_contacts=columns", "robot.shin_collision=true",

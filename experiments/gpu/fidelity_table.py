@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 ORDER = ("reference", "lean", "nearest_full", "mjx_converged", "columns", "columns_converged",
-         "columns_converged_x64", "evaluation")
+         "columns_converged_x64", "evaluation", "evaluation_exit")
 """Column order; options not named here (issue 22's candidates) follow in name order."""
 
 
@@ -42,7 +42,7 @@ def _ground_truth(root: Path, before: bool = False) -> dict:
 def main(root: Path, before: bool = False) -> None:
     gt = _ground_truth(root, before)
     mjx = {}
-    folders = ["mjx", "mjx_converged", "mjx_columns", "mjx_x64", "mjx_eval"]
+    folders = ["mjx", "mjx_converged", "mjx_columns", "mjx_x64", "mjx_eval", "mjx_evaluation_exit"]
     folders += sorted(p.name for p in root.glob("mjx_columns_*"))  # issue 22's candidates
     for folder in folders:  # not mjx_res0125/ (another grid)
         for f in sorted((root / folder).glob("mjx_*.json")):

@@ -354,6 +354,18 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
       [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix --config $models \
         --robots 1000 --out "$OUT/transfer_paper" 2>&1 | grep -v warp ;;
+    # eval-paper-committed: the committed RQ1 policies (experiments/results/stage2_u_paper*/) in
+    # today's evaluation physics at the authors' 0.8 m (PAPER_RADII), into $OUT/paper_eval/<name>/
+    eval-paper-committed)
+      for p in experiments/results/stage2_u_paper*/policy.npz; do
+        name=$(basename "$(dirname "$p")")
+        for r in ${PAPER_RADII:-0.8}; do
+          [ "$(left)" -lt 90 ] && { echo "no time left for $name at $r m"; break; }
+          timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" \
+            --family u_shaped --robots 1000 --env "success_distance=$r" \
+            --out "$OUT/paper_eval/$name/success_${r}m" 2>&1 | grep -v warp
+        done
+      done ;;
     eval-paper)
       shopt -s nullglob
       for p in /tmp/policies/stage2_u_paper*.npz .carry/stage2_u_paper*/policy.npz; do

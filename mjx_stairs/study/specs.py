@@ -35,8 +35,8 @@ class EvalSpec:
     tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
     physics: str = field(
         default=EVAL_PHYSICS,
-        metadata={"help": "physics preset to evaluate in: evaluation (default), reference, lean, "
-                  "or trained (the policy's own)"})
+        metadata={"help": "physics preset to evaluate in: evaluation (default), evaluation_top "
+                  "(as published to 2026-11-24), reference, lean, or trained (the policy's own)"})
     env_overrides: tuple[str, ...] = field(
         default=(),
         metadata={"flag": "--env", "metavar": "KEY=VALUE",
