@@ -28,6 +28,10 @@ POLICIES = {
     "stage2_u": "experiments/results/stage2_u/policy.npz",
     "stage2_u_lean": "experiments/results/stage2_u_lean/policy.npz",
 }
+RQ1_POLICIES = {n: f"experiments/results/{n}/policy.npz" for n in (
+    "stage2_u_paper", "stage2_u_paper_s1", "stage2_u_paper_s2", "stage2_u_paper_no_stall_s0",
+    "stage2_u_paper_no_stall_s1")}
+"""Issue 21's paper-setting policies: for `gt --policies` (not in the fidelity table)."""
 OPTIONS = {  # env overrides of each physics option
     "reference": ("robot.terrain_contacts=mjx", "robot.shin_collision=true",
                   "robot.ls_iterations=5"),
@@ -97,7 +101,7 @@ def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float)
 
 
 def _gt_task(args) -> str:
-    policy_name, cell, robots, out, res, terrain = args
+    policy_name, cell, robots, out, res, terrain, seed, nthread = args
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study.evaluate import CellSpec
     from mjx_stairs.study.ground_truth import success_in_ground_truth
@@ -106,16 +110,23 @@ def _gt_task(args) -> str:
     if path.exists():
         return f"{path.name} (kept)"
     spec = CellSpec(cells=(cell,), robots_per_cell=robots, env_overrides=OPTIONS["reference"],
-                    resolution=res)
-    rec = success_in_ground_truth(load_policy(POLICIES[policy_name]), spec, nthread=1,
+                    resolution=res, seed=seed)
+    rec = success_in_ground_truth(load_policy({**POLICIES, **RQ1_POLICIES}[policy_name]), spec,
+                                  nthread=nthread,
                                   terrain=terrain)
     rec["policy"] = policy_name
     write(path, rec)
     return f"{path.name}: {100 * rec['success'][0]:.1f} % ({rec['wall_s']:.0f} s)"
 
 
-def run_gt(out: Path, robots: int, workers: int, cells: list, res: float, terrain: str) -> None:
-    tasks = [(p, c, robots, str(out), res, terrain) for c in cells for p in POLICIES]
+def run_gt(out: Path, robots: int, workers: int, cells: list, res: float, terrain: str,
+           seed: int = 0, policies: tuple[str, ...] = tuple(POLICIES)) -> None:
+    """Each policy on each cell in CPU MuJoCo, one task per process; fewer tasks than workers:
+    the spare workers become MuJoCo threads of each task."""
+    n = len(cells) * len(policies)
+    nthread = max(1, workers // max(1, n))
+    tasks = [(p, c, robots, str(out), res, terrain, seed, nthread) for c in cells
+             for p in policies]
     ctx = multiprocessing.get_context("spawn")
     with ctx.Pool(workers) as pool:
         for line in pool.imap_unordered(_gt_task, tasks):
@@ -157,7 +168,8 @@ def main() -> None:
     ap.add_argument("--options", default="reference,lean,nearest_full")
     ap.add_argument("--resolution", type=float, default=0.025)
     ap.add_argument("--cells", default="", help="comma-separated indices into CELLS; '' = all")
-    ap.add_argument("--policies", default=",".join(POLICIES), help="for first")
+    ap.add_argument("--policies", default=",".join(POLICIES), help="for first and gt")
+    ap.add_argument("--seed", type=int, default=0, help="for gt: the robots' starts (as eval's)")
     ap.add_argument("--terrain", default="boxes", choices=("boxes", "heightfield"))
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
@@ -169,7 +181,8 @@ def main() -> None:
         run_mjx(a.out, a.robots or 1000, a.options.split(","), cells, a.resolution)
     else:
         os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
-        run_gt(a.out, a.robots or 200, a.workers, cells, a.resolution, a.terrain)
+        run_gt(a.out, a.robots or 200, a.workers, cells, a.resolution, a.terrain, a.seed,
+               a.policies.split(","))
 
 
 if __name__ == "__main__":

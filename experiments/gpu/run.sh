@@ -14,7 +14,8 @@
 # through jax.distributed), eval-committed (committed policies in the reference physics), code-suite
 # (issue 23: the code suite baseline), fidelity, fidelity-x64, bench-colliders (issue 19: MJX
 # physics options against the ground truth, their speed), transfer-eval, rq1-eval (the transfer
-# matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper
+# matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper,
+# eval-paper-committed
 # (issue 21: stage 2 as the paper has it, SEED=N), straight-paper, l-shaped-paper, spiral-paper,
 # transfer-paper (RQ2 in the paper's setting), bench-options (issue 22: the speed of
 # physics between columns and the evaluation physics), warp (MuJoCo Warp's speed and success), pack; and on the host's CPUs beside the

@@ -92,6 +92,16 @@ def _check_finished(finished: np.ndarray) -> None:
         raise RuntimeError("evaluation ended with robots still in their first episode")
 
 
+PHYSICS_FIELDS = ("terrain_contacts", "shin_collision", "solver_iterations", "ls_iterations",
+                  "sunk_exit")
+
+
+def physics_settings(env: StairEnv) -> dict[str, Any]:
+    """The robot physics an evaluation ran in, resolved from its preset: a record says what its
+    numbers mean even after a preset's name is given to other settings."""
+    return {k: getattr(env.config.robot, k) for k in PHYSICS_FIELDS}
+
+
 def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     """Run robots_per_level robots on every level for one episode each.
 
@@ -123,6 +133,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
         "wall_s": wall,
         "device": jax.devices()[0].device_kind,
         "eval_physics": spec.physics,
+        "physics_settings": physics_settings(env),
         **({"env_overrides": list(spec.env_overrides)} if spec.env_overrides else {}),
     }
 
@@ -237,7 +248,8 @@ def success_by_cell(policies: dict[str, Policy], spec: CellSpec) -> dict[str, di
     env = cell_env(next(iter(policies.values())), spec)
     state = initial_states(env, spec)
     return {name: cell_records(spec, succeeded, fell, physics="mjx", wall_s=wall,
-                               device=jax.devices()[0].device_kind)
+                               device=jax.devices()[0].device_kind,
+                               physics_settings=physics_settings(env))
             for name, _, succeeded, fell, _, wall in run_policies(policies, env, state)}
 
 
@@ -247,7 +259,9 @@ def evaluate(
     spec: EvalSpec,
     out_dir: str | os.PathLike | None = None,
 ) -> list[dict[str, Any]]:
-    """Success per (checkpoint, family, level); writes results.json and results.md to out_dir."""
+    """Success per (checkpoint, family, level); writes results.json and results.md to out_dir,
+    rewritten (atomically) after every (checkpoint, family), so that a run cut short keeps what
+    it finished."""
     results = []
     for path in checkpoints:
         policy = load_policy(path)
@@ -257,11 +271,11 @@ def evaluate(
             r["policy_iteration"] = int(policy.metadata.get("iteration", -1))
             results.append(r)
             print(markdown_table([r]), flush=True)
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        atomic.write_text(out / "results.json", json.dumps(results, indent=2))
-        atomic.write_text(out / "results.md", markdown_table(results))
+            if out_dir is not None:
+                out = Path(out_dir)
+                out.mkdir(parents=True, exist_ok=True)
+                atomic.write_text(out / "results.json", json.dumps(results, indent=2))
+                atomic.write_text(out / "results.md", markdown_table(results))
     return results
 
 

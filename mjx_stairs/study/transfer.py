@@ -7,6 +7,7 @@ on B over the success of B's own model on B, each averaged over test levels 3 an
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -49,19 +50,55 @@ def load_models(path: str | os.PathLike) -> dict[str, str]:
     return dict(models)
 
 
+def _sha256(path: str | os.PathLike) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _finished_cell(path: Path, want: dict[str, Any]) -> dict[str, Any] | None:
+    """The cell record at `path` if it was evaluated as `want` asks, else None (a file that is
+    not a cell record counts as not finished: records are written whole, so only a foreign file
+    can be one)."""
+    try:
+        rec = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(rec, dict) or any(rec.get(k) != v for k, v in want.items()):
+        return None
+    return rec
+
+
 def matrix(
     models: dict[str, str], spec: evaluate.EvalSpec, out_dir: str | os.PathLike | None = None
 ) -> dict[str, Any]:
-    """Success of each model (rows) on each family (columns) at spec.levels; transferability."""
+    """Success of each model (rows) on each family (columns) at spec.levels; transferability.
+    With `out_dir`, every (model, family) cell is written to out_dir/cells/ when it finishes and
+    a cell finished there before (same policy file, levels, robots, physics, overrides) is
+    reused: a matrix cut short resumes where it stopped."""
     families = list(models)
     success: dict[str, dict[str, dict[str, Any]]] = {}
+    cells = Path(out_dir) / "cells" if out_dir is not None else None
     for src, path in models.items():
-        policy = load_policy(path)
+        policy, digest = None, _sha256(path)
         success[src] = {}
         for dst in families:
-            success[src][dst] = evaluate.success_by_level(
-                policy, dataclasses.replace(spec, family=dst)
-            )
+            dst_spec = dataclasses.replace(spec, family=dst)
+            want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
+                    "robots_per_level": spec.robots_per_level,
+                    "episode_length_s": spec.episode_length_s, "seed": spec.seed,
+                    "eval_physics": spec.physics, "checkpoint": str(path),
+                    "checkpoint_sha256": digest}
+            cell = cells / f"{src}__on__{dst}.json" if cells is not None else None
+            rec = _finished_cell(cell, want) if cell is not None else None
+            if rec is not None and rec.get("env_overrides", []) == list(spec.env_overrides):
+                print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
+            else:
+                policy = policy or load_policy(path)
+                rec = evaluate.success_by_level(policy, dst_spec)
+                rec.update(checkpoint=str(path), checkpoint_sha256=digest)
+                if cell is not None:
+                    cell.parent.mkdir(parents=True, exist_ok=True)
+                    atomic.write_text(cell, json.dumps(rec, indent=2))
+            success[src][dst] = rec
     mean = {s: {d: float(np.mean(success[s][d]["success"])) for d in families} for s in families}
     transfer = transferability(mean)
     out = {

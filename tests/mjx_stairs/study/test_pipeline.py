@@ -95,7 +95,7 @@ def test_critic_map_covers_the_tile_and_blanks_walls(trained):
     assert np.ptp(v[walkable]) > 0  # the critic sees different places differently
 
 
-def test_transfer_matrix_and_transferability(trained, tmp_path):
+def test_transfer_matrix_and_transferability(trained, tmp_path, monkeypatch):
     mean = {"u": {"u": 0.8, "s": 0.9}, "s": {"u": 0.02, "s": 0.95}}
     t = transfer.transferability(mean)
     assert t["u"]["s"] == pytest.approx(0.9 / 0.95) and t["s"]["u"] == pytest.approx(0.02 / 0.8)
@@ -118,6 +118,26 @@ def test_transfer_matrix_and_transferability(trained, tmp_path):
     assert result["success"]["u_shaped"]["u_shaped"]["env_overrides"] == list(spec.env_overrides)
     md = (tmp_path / "transfer.md").read_text()
     assert "Transferability" in md and "evaluated with robot.terrain_contacts=columns" in md
+    cell = result["success"]["u_shaped"]["u_shaped"]
+    assert cell["physics_settings"]["terrain_contacts"] == "columns"
+    assert cell["physics_settings"]["sunk_exit"] == "nearest"  # the evaluation physics
+    # a matrix run again over the same folder keeps its finished cells (a killed run resumes)
+    def no_evaluation(*_):
+        raise AssertionError("a finished cell was evaluated again")
+
+    monkeypatch.setattr(evaluate, "success_by_level", no_evaluation)
+    again = transfer.matrix({"u_shaped": path}, spec, tmp_path)
+    assert again["success"] == result["success"]
+    # ... but not a cell of another policy file, other levels or other overrides
+    saved = tmp_path / "cells" / "u_shaped__on__u_shaped.json"
+    want = {k: cell[k] for k in ("family", "levels", "checkpoint", "checkpoint_sha256")}
+    assert transfer._finished_cell(saved, want) == cell
+    assert transfer._finished_cell(saved, {**want, "checkpoint_sha256": "0" * 64}) is None
+    assert transfer._finished_cell(saved, {**want, "levels": [3, 4]}) is None
+    with pytest.raises(AssertionError, match="evaluated again"):
+        transfer.matrix({"u_shaped": path}, dataclasses.replace(spec, env_overrides=()), tmp_path)
+    saved.write_text("{not json")
+    assert transfer._finished_cell(saved, want) is None
     with pytest.raises(Exception, match="unknown stair family"):
         bad = tmp_path / "bad.toml"
         bad.write_text('[models]\nzigzag = "x.npz"\n')
