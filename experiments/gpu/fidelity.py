@@ -54,15 +54,21 @@ OPTIONS = {  # env overrides of each physics option
     # (mjx_evaluation_exit/), the preset robot.physics=evaluation
     "evaluation_exit": ("robot.physics=evaluation",),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
-    # (8): is a few iterations' convergence enough? Their speed: run.sh step bench-options.
+    # (8): is a few iterations' convergence enough? With today's evaluation physics's sunk rule
+    # (nearest face; their speed, run.sh step bench-options, was measured 2026-11-25 with the
+    # top rule, which costs the same: bench/h100_4096_options_*.json)
     "columns_n2": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
-                   "robot.solver_iterations=2", "robot.ls_iterations=5"),
+                   "robot.solver_iterations=2", "robot.ls_iterations=5",
+                   "robot.sunk_exit=nearest"),
     "columns_n3": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
-                   "robot.solver_iterations=3", "robot.ls_iterations=5"),
+                   "robot.solver_iterations=3", "robot.ls_iterations=5",
+                   "robot.sunk_exit=nearest"),
     "columns_n4": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
-                   "robot.solver_iterations=4", "robot.ls_iterations=8"),
+                   "robot.solver_iterations=4", "robot.ls_iterations=8",
+                   "robot.sunk_exit=nearest"),
     "columns_noshin_n3": ("robot.terrain_contacts=columns", "robot.shin_collision=false",
-                          "robot.solver_iterations=3", "robot.ls_iterations=5"),
+                          "robot.solver_iterations=3", "robot.ls_iterations=5",
+                          "robot.sunk_exit=nearest"),
 }
 CELLS = (
     [("u_shaped", "test", lv) for lv in range(6)]
