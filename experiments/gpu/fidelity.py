@@ -32,6 +32,7 @@ RQ1_POLICIES = {n: f"experiments/results/{n}/policy.npz" for n in (
     "stage2_u_paper", "stage2_u_paper_s1", "stage2_u_paper_s2", "stage2_u_paper_no_stall_s0",
     "stage2_u_paper_no_stall_s1")}
 """Issue 21's paper-setting policies: for `gt --policies` (not in the fidelity table)."""
+KNOWN_POLICIES = {**POLICIES, **RQ1_POLICIES}
 OPTIONS = {  # env overrides of each physics option
     "reference": ("robot.terrain_contacts=mjx", "robot.shin_collision=true",
                   "robot.ls_iterations=5"),
@@ -117,9 +118,8 @@ def _gt_task(args) -> str:
         return f"{path.name} (kept)"
     spec = CellSpec(cells=(cell,), robots_per_cell=robots, env_overrides=OPTIONS["reference"],
                     resolution=res, seed=seed)
-    rec = success_in_ground_truth(load_policy({**POLICIES, **RQ1_POLICIES}[policy_name]), spec,
-                                  nthread=nthread,
-                                  terrain=terrain)
+    rec = success_in_ground_truth(load_policy(KNOWN_POLICIES[policy_name]), spec,
+                                  nthread=nthread, terrain=terrain)
     rec["policy"] = policy_name
     write(path, rec)
     return f"{path.name}: {100 * rec['success'][0]:.1f} % ({rec['wall_s']:.0f} s)"

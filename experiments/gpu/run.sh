@@ -128,6 +128,17 @@ fidelity_mjx() {  # fidelity_mjx OPTION [x64]: fidelity.py mjx (1000 robots per 
     | tee -a "$OUT/ground_truth/$dir.log"
 }
 
+paper_eval() {  # paper_eval POLICY NAME RADII...: POLICY on the U test levels, 1000 robots, the
+  # evaluation physics, at each success radius, into $OUT/paper_eval/NAME/success_<R>m/
+  local p=$1 name=$2 r; shift 2
+  for r in "$@"; do
+    [ "$(left)" -lt 90 ] && { echo "no time left for $name at $r m"; break; }
+    timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" \
+      --family u_shaped --robots 1000 --env "success_distance=$r" \
+      --out "$OUT/paper_eval/$name/success_${r}m" 2>&1 | grep -v warp
+  done
+}
+
 two_processes() {  # the same short stage-2 run: one process on GPUs 0,1, then two processes of
   # one GPU each through jax.distributed (NCCL; NCCL_NVLS_ENABLE stays as the host sets it: 0)
   local d="$OUT/two_processes" port=$(( 20000 + RANDOM % 20000 ))
@@ -359,25 +370,14 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
     # today's evaluation physics at the authors' 0.8 m (PAPER_RADII), into $OUT/paper_eval/<name>/
     eval-paper-committed)
       for p in experiments/results/stage2_u_paper*/policy.npz; do
-        name=$(basename "$(dirname "$p")")
-        for r in ${PAPER_RADII:-0.8}; do
-          [ "$(left)" -lt 90 ] && { echo "no time left for $name at $r m"; break; }
-          timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" \
-            --family u_shaped --robots 1000 --env "success_distance=$r" \
-            --out "$OUT/paper_eval/$name/success_${r}m" 2>&1 | grep -v warp
-        done
+        paper_eval "$p" "$(basename "$(dirname "$p")")" ${PAPER_RADII:-0.8}
       done ;;
     eval-paper)
       shopt -s nullglob
       for p in /tmp/policies/stage2_u_paper*.npz .carry/stage2_u_paper*/policy.npz; do
         name=$(basename "$p" .npz); [ "$name" = policy ] && name=$(basename "$(dirname "$p")")
         [ -d "$OUT/paper_eval/$name" ] && continue  # trained here and carried: once
-        for r in 0.8 0.5; do
-          [ "$(left)" -lt 90 ] && { echo "no time left for $name at $r m"; break; }
-          timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" \
-            --family u_shaped --robots 1000 --env "success_distance=$r" \
-            --out "$OUT/paper_eval/$name/success_${r}m" 2>&1 | grep -v warp
-        done
+        paper_eval "$p" "$name" 0.8 0.5
       done ;;
     report)  # the policies trained in this command (train copies them to /tmp/policies), else
       # the committed ones; REPORT_STAGE2 / REPORT_ABLATION name others; a missing ablation is

@@ -24,6 +24,7 @@ from mjx_stairs import atomic
 from mjx_stairs.env.config import EnvConfig, env_config_from, evaluation_config
 from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.rl.policy import Policy, load_policy, policy_action, saved_config
+from mjx_stairs.sim.robot import PHYSICS
 from mjx_stairs.study.specs import EVAL_PHYSICS, EvalSpec
 
 
@@ -92,14 +93,11 @@ def _check_finished(finished: np.ndarray) -> None:
         raise RuntimeError("evaluation ended with robots still in their first episode")
 
 
-PHYSICS_FIELDS = ("terrain_contacts", "shin_collision", "solver_iterations", "ls_iterations",
-                  "sunk_exit")
-
-
 def physics_settings(env: StairEnv) -> dict[str, Any]:
-    """The robot physics an evaluation ran in, resolved from its preset: a record says what its
-    numbers mean even after a preset's name is given to other settings."""
-    return {k: getattr(env.config.robot, k) for k in PHYSICS_FIELDS}
+    """The robot physics an evaluation ran in (the fields the evaluation preset sets), resolved
+    from its preset: a record says what its numbers mean even after a preset's name is given to
+    other settings."""
+    return {k: getattr(env.config.robot, k) for k in PHYSICS["evaluation"]}
 
 
 def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
@@ -263,6 +261,9 @@ def evaluate(
     rewritten (atomically) after every (checkpoint, family), so that a run cut short keeps what
     it finished."""
     results = []
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
     for path in checkpoints:
         policy = load_policy(path)
         for family in families:
@@ -271,9 +272,7 @@ def evaluate(
             r["policy_iteration"] = int(policy.metadata.get("iteration", -1))
             results.append(r)
             print(markdown_table([r]), flush=True)
-            if out_dir is not None:
-                out = Path(out_dir)
-                out.mkdir(parents=True, exist_ok=True)
+            if out is not None:
                 atomic.write_text(out / "results.json", json.dumps(results, indent=2))
                 atomic.write_text(out / "results.md", markdown_table(results))
     return results

@@ -85,16 +85,17 @@ def matrix(
             want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
                     "robots_per_level": spec.robots_per_level,
                     "episode_length_s": spec.episode_length_s, "seed": spec.seed,
-                    "eval_physics": spec.physics, "checkpoint": str(path),
-                    "checkpoint_sha256": digest}
+                    "eval_physics": spec.physics, "env_overrides": list(spec.env_overrides),
+                    "checkpoint": str(path), "checkpoint_sha256": digest}
             cell = cells / f"{src}__on__{dst}.json" if cells is not None else None
             rec = _finished_cell(cell, want) if cell is not None else None
-            if rec is not None and rec.get("env_overrides", []) == list(spec.env_overrides):
+            if rec is not None:
                 print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
             else:
                 policy = policy or load_policy(path)
                 rec = evaluate.success_by_level(policy, dst_spec)
-                rec.update(checkpoint=str(path), checkpoint_sha256=digest)
+                rec.update(env_overrides=list(spec.env_overrides), checkpoint=str(path),
+                           checkpoint_sha256=digest)
                 if cell is not None:
                     cell.parent.mkdir(parents=True, exist_ok=True)
                     atomic.write_text(cell, json.dumps(rec, indent=2))
