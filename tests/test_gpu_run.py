@@ -20,7 +20,7 @@ def test_header_names_every_step():
     text = RUN.read_text()
     header = " ".join(line[1:] for line in text.split("set -uo pipefail")[0].splitlines()
                       if line.startswith("#"))
-    body = text.split('for step in "$@"; do')[1]
+    body = text.split("run_step() {")[1]
     steps = set()
     for pattern in re.findall(r"^    ([a-z0-9|-]+)\)", body, flags=re.M):
         steps.update(pattern.split("|"))
@@ -28,3 +28,19 @@ def test_header_names_every_step():
     missing = sorted(s for s in steps if not re.search(rf"(?<![\w-]){re.escape(s)}(?![\w-])",
                                                        header))
     assert not missing, f"steps missing from run.sh's header: {missing}"
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+def test_gpu_groups_run_their_steps_pinned_with_their_variables(tmp_path):
+    """gpuN:... arguments run in the background, each on its own GPU with its own variables,
+    and the script waits for them before it ends."""
+    env = {"PATH": "/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path),
+           "HOME": str(tmp_path)}
+    run = subprocess.run(["bash", str(RUN), "60", "gpu0:SEED=7,gpus", "gpu1:gpus,no-such-step"],
+                         env=env, capture_output=True, text=True, timeout=120, cwd=RUN.parents[2])
+    logs = {n: (tmp_path / "logs" / f"gpu{n}.log").read_text() for n in (0, 1)}
+    assert "CUDA_VISIBLE_DEVICES=0 SEED=7" in logs[0], logs[0]
+    assert "CUDA_VISIBLE_DEVICES=1 SEED=unset" in logs[1], logs[1]
+    assert "unknown step no-such-step" in logs[1]
+    assert "== gpu0: gpus done" in logs[0] and "== gpu1: gpus done" in logs[1]
+    assert "== gpu1.log:" in run.stdout  # waited for, and its log shown

@@ -30,7 +30,7 @@ POLICIES = {
 }
 RQ1_POLICIES = {n: f"experiments/results/{n}/policy.npz" for n in (
     "stage2_u_paper", "stage2_u_paper_s1", "stage2_u_paper_s2", "stage2_u_paper_no_stall_s0",
-    "stage2_u_paper_no_stall_s1")}
+    "stage2_u_paper_no_stall_s1", "stage2_u_paper_no_stall_s2")}
 """Issue 21's paper-setting policies: for `gt --policies` (not in the fidelity table)."""
 KNOWN_POLICIES = {**POLICIES, **RQ1_POLICIES}
 OPTIONS = {  # env overrides of each physics option

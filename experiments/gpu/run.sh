@@ -2,6 +2,10 @@
 # One experiment step on a lent GPU host (no package index there): install the wheelhouse that
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
+# On a host of several GPUs a step argument gpuN:TOKEN,TOKEN,... runs its steps in turn on GPU N
+# alone, in the background beside the other arguments (a TOKEN KEY=VALUE sets a variable for the
+# group's later steps), e.g. gpu0:SEED=0,paper gpu1:SEED=1,paper pack: device time is counted
+# per machine, so two GPUs train two runs for the price of one (gpus: what a group sees).
 # Steps (end with pack, since only 8 files come back), each reproducing a published result
 # (docs/results.md names the steps that produced each number; one-off exploratory steps are in
 # git show 699f1d5:experiments/gpu/run.sh; the one-off session scripts folded into the steps below
@@ -163,7 +167,44 @@ two_processes() {  # the same short stage-2 run: one process on GPUs 0,1, then t
   python3 experiments/compare_runs.py /tmp/runs/one /tmp/runs/two --out "$d/compare.json"
 }
 
-for step in "$@"; do
+GPU_JOBS=()
+gpu_group() {  # gpuN:TOKEN,...: on GPU N alone (CUDA_VISIBLE_DEVICES=N), in the background beside
+  # the other groups, each TOKEN in turn: KEY=VALUE sets a variable for the group's later steps
+  # (SEED=2, TRAIN_ARGS=...), anything else is a step. Its log: $OUT/logs/gpuN.log
+  local n=${1%%:*} tokens=${1#*:} count
+  n=${n#gpu}; count=$(nvidia-smi -L 2>/dev/null | wc -l)
+  if [ "$count" -gt 0 ] && [ "$n" -ge "$count" ]; then echo "no GPU $n on this host ($count)"; return; fi
+  mkdir -p "$OUT/logs"
+  (
+    export CUDA_VISIBLE_DEVICES=$n
+    IFS=, read -ra toks <<< "$tokens"
+    for t in "${toks[@]}"; do
+      case $t in
+        *=*) export "${t?}" ;;
+        *) run_step "$t"; echo "== gpu$n: $t done at $(( $(date +%s) - T0 ))s" ;;
+      esac
+    done
+  ) > "$OUT/logs/gpu$n.log" 2>&1 &
+  GPU_JOBS+=($!)
+  echo "== gpu$n: $tokens in the background, log logs/gpu$n.log"
+}
+
+wait_gpu_groups() {  # wait for the GPU groups (until 10 s before the deadline); show each log's end
+  local p alive f
+  [ ${#GPU_JOBS[@]} -eq 0 ] && return 0
+  while [ "$(left)" -gt 10 ]; do
+    alive=0
+    for p in "${GPU_JOBS[@]}"; do kill -0 "$p" 2>/dev/null && alive=1; done
+    [ "$alive" = 0 ] && break
+    sleep 5
+  done
+  for p in "${GPU_JOBS[@]}"; do kill -0 "$p" 2>/dev/null && echo "GPU group $p still running"; done
+  GPU_JOBS=()
+  for f in "$OUT"/logs/gpu*.log; do echo "== ${f##*/}:"; grep -v warp "$f" | tail -25; done
+}
+
+run_step() {
+  local step=$1
   case $step in
     # EXP1 (docs/results.md sections 1-3): stage 1, stage 2 (waypoint goal), its no-stall
     # ablation, the paper's final-goal stage 2; report evaluates them (below)
@@ -329,12 +370,12 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
     # no-stall ablation and the paper's final goal with and without the stall penalty, into
     # $OUT/rq_eval
     transfer-eval)
-      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix \
         --config experiments/results/transfer_lean/models.toml --robots 1000 \
         --out "$OUT/transfer_lean_eval" 2>&1 | grep -v warp ;;
     rq1-eval)
-      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint \
         experiments/results/stage2_u_no_stall/policy.npz \
         experiments/results/stage2_u_final_goal/policy.npz \
@@ -363,7 +404,7 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
         [ -f "$p" ] || p=.carry/$n/policy.npz
         echo "$fam = \"$p\"" >> $models
       done
-      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; continue; }
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix --config $models \
         --robots 1000 --out "$OUT/transfer_paper" 2>&1 | grep -v warp ;;
     # eval-paper-committed: the committed RQ1 policies (experiments/results/stage2_u_paper*/) in
@@ -396,24 +437,34 @@ print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
       w=/tmp/warp_lang-1.19.0-py3-none-manylinux_2_28_x86_64.whl
       cat .whl_warp_a/warp_lang.part.00 .whl_warp_b/warp_lang.part.01 \
         .whl_warp_c/warp_lang.part.02 .whl_warp_d/warp_lang.part.03 > $w \
-        || { echo "warp parts missing"; continue; }
+        || { echo "warp parts missing"; return; }
       python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site $w \
-        .whl_warp_d/mujoco_warp-*.whl >/dev/null 2>&1 || { echo "warp install failed"; continue; }
+        .whl_warp_d/mujoco_warp-*.whl >/dev/null 2>&1 || { echo "warp install failed"; return; }
       mkdir -p "$OUT/warp"
       python3 experiments/gpu/warp_physics.py rate "$OUT/warp/rate_4096.json" --robots 4096 \
         2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit"
       python3 experiments/gpu/warp_physics.py success "$OUT/warp/success.json" --robots 1000 \
         --cells "${WARP_CELLS:-8,9,15,16,3,5}" 2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit" ;;
+    gpus)  # what this step sees: its GPU(s) and seed (a check of gpuN: groups)
+      echo "CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-unset} SEED=${SEED:-unset}"
+      nvidia-smi -L 2>/dev/null || true ;;
     pack)  # only 8 files of at most 16 MiB come back from a device command: one tar per output
       # folder, cut in 15 MiB parts (NAME.tar.00, .01: cat them back together) where larger; the
       # background jobs' output first
-      collect
+      wait_gpu_groups; collect
       shopt -s nullglob; for d in "$OUT"/*/; do d=${d%/}; tar -C "$OUT" -cf "$d.tar" "$(basename "$d")" && rm -r "$d"
         if [ "$(stat -c %s "$d.tar")" -gt 15728640 ]; then split -b 15M -d "$d.tar" "$d.tar." && rm "$d.tar"; fi
       done
       ls -la "$OUT" ;;
     *) echo "unknown step $step"; exit 2 ;;
   esac
-  echo "== $step done at $(( $(date +%s) - T0 ))s"
+}
+
+for step in "$@"; do
+  case $step in
+    gpu[0-9]*:*) gpu_group "$step" ;;
+    *) run_step "$step"; echo "== $step done at $(( $(date +%s) - T0 ))s" ;;
+  esac
 done
+wait_gpu_groups
 collect  # background jobs started after the last pack (or with no pack)
