@@ -70,6 +70,15 @@ OPTIONS = {  # env overrides of each physics option
     "columns_noshin_n3": ("robot.terrain_contacts=columns", "robot.shin_collision=false",
                           "robot.solver_iterations=3", "robot.ls_iterations=5",
                           "robot.sunk_exit=nearest"),
+    # ... and with a 10 ms physics step (PD and contacts at 100 Hz, 2 steps per 20 ms policy
+    # step, half the physics of every candidate above; issue 22)
+    "evaluation_dt10": ("robot.physics=evaluation", "robot.timestep=0.01", "decimation=2"),
+    "columns_n4_dt10": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
+                        "robot.solver_iterations=4", "robot.ls_iterations=8",
+                        "robot.sunk_exit=nearest", "robot.timestep=0.01", "decimation=2"),
+    "columns_n3_dt10": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
+                        "robot.solver_iterations=3", "robot.ls_iterations=5",
+                        "robot.sunk_exit=nearest", "robot.timestep=0.01", "decimation=2"),
 }
 CELLS = (
     [("u_shaped", "test", lv) for lv in range(6)]

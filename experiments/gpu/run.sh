@@ -22,7 +22,9 @@
 # eval-paper-committed
 # (issue 21: stage 2 as the paper has it, SEED=N), straight-paper, l-shaped-paper, spiral-paper,
 # transfer-paper (RQ2 in the paper's setting), bench-options (issue 22: the speed of
-# physics between columns and the evaluation physics), warp (MuJoCo Warp's speed and success), pack; and on the host's CPUs beside the
+# physics between columns and the evaluation physics), stage2-physics, eval-physics (issue 22:
+# stage 2 trained in one physics option, judged in the evaluation physics), warp (MuJoCo Warp's
+# speed and success), gpus, pack; and on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
@@ -130,6 +132,11 @@ fidelity_mjx() {  # fidelity_mjx OPTION [x64]: fidelity.py mjx (1000 robots per 
   env "${env[@]}" timeout $(( $(left) - 15 )) python3 experiments/gpu/fidelity.py mjx \
     "$OUT/ground_truth/$dir" --options "$opt" --cells "${FIDELITY_CELLS:-}" 2>&1 | grep -v warp \
     | tee -a "$OUT/ground_truth/$dir.log"
+}
+
+option_overrides() {  # option_overrides NAME: fidelity.py's physics option NAME as training overrides
+  python3 -c "import sys; sys.path.insert(0, 'experiments/gpu'); import fidelity; \
+print(' '.join('env.' + o for o in fidelity.OPTIONS['$1']))"
 }
 
 paper_eval() {  # paper_eval POLICY NAME RADII...: POLICY on the U test levels, 1000 robots, the
@@ -280,11 +287,41 @@ run_step() {
     bench-options)
       for opt in ${BENCH_OPTIONS:-evaluation evaluation_exit columns_n2 columns_n3 columns_n4 columns_noshin_n3}; do
         [ "$(left)" -lt 120 ] && { echo "no time left for $opt"; break; }
-        ov=$(python3 -c "import sys; sys.path.insert(0, 'experiments/gpu'); import fidelity; \
-print(' '.join('env.' + o for o in fidelity.OPTIONS['$opt']))")
+        ov=$(option_overrides "$opt")
         timeout $(( $(left) - 15 )) python3 -m mjx_stairs bench --config experiments/stage2_u.toml \
           --robots 4096 --parts physics,train $ov --out "$OUT/bench/options_$opt.json" 2>&1 \
           | grep -v warp
+      done ;;
+    # issue 22, one physics option at a time: stage 2 (stage2_u.toml, PHYSICS_ITERATIONS, default
+    # 290 as stage2_u was published) trained in fidelity.py's option PHYSICS_OPTION
+    # (evaluation_exit: the evaluation physics itself, the baseline; columns_n4, columns_n4_dt10,
+    # ...), seed SEED, as stage2_u_<option>_s<SEED>; eval-physics: every such policy trained in
+    # this command (else carried) on the U-shaped and straight `extended` levels and the `code`
+    # suite (up and down, 30 s), 1000 robots, in the evaluation physics (5 ms steps, the policy's
+    # 50 Hz), into $OUT/physics_eval/<name>/; a part already there is skipped
+    stage2-physics)
+      opt=${PHYSICS_OPTION:?PHYSICS_OPTION names a fidelity.py option}
+      name=stage2_u_${opt}_s${SEED:-0}
+      # shellcheck disable=SC2046
+      train "$name" experiments/stage2_u.toml $(option_overrides "$opt") \
+        "train.total_iterations=${PHYSICS_ITERATIONS:-290}" "train.seed=${SEED:-0}" \
+        "train.experiment=$name" ;;
+    eval-physics)
+      shopt -s nullglob
+      for p in /tmp/policies/stage2_u_*_s[0-9]*.npz .carry/stage2_u_*_s[0-9]*/policy.npz; do
+        name=$(basename "$p" .npz); [ "$name" = policy ] && name=$(basename "$(dirname "$p")")
+        case $name in stage2_u_paper*) continue ;; esac
+        d="$OUT/physics_eval/$name"; mkdir -p "$d"
+        for fam in u_shaped straight; do
+          [ -f "$d/$fam/results.json" ] && continue
+          [ "$(left)" -lt 90 ] && { echo "no time left for $name $fam"; break 2; }
+          timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --family $fam \
+            --schedule extended --robots 1000 --out "$d/$fam" 2>&1 | grep -v warp
+        done
+        [ -f "$d/code.json" ] && continue
+        [ "$(left)" -lt 240 ] && { echo "no time left for $name code"; break; }
+        timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --suite code \
+          --robots 1000 --episode-s 30 --out "$d/code.json" 2>&1 | grep -v warp
       done ;;
     # committed policies (EVAL_RUNS: names under experiments/results/) in the reference physics,
     # loaded as a robot runs them (float32 encoder), into $OUT/eval/<name>

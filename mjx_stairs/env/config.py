@@ -98,6 +98,9 @@ class RouteConfig:
 
     perturb_prob: float = 0.0  # chance that an episode's route is perturbed (0: off)
     lateral: float = 0.33  # largest sideways shift, a fraction of the stair's clear width
+    # chance that a perturbed route's shift is the largest itself (either side), not uniform up
+    # to it: the evaluation's offset routes sit at the bound, which a uniform draw rarely gives
+    lateral_at_bound: float = 0.0
     corner_cut_m: float = 1.0  # largest half-span of the corner cutting (m)
     coarse_points: tuple[int, int] = (3, 8)  # the route resampled to this many points
 
@@ -106,6 +109,8 @@ class RouteConfig:
         _require("env.route", [
             ("perturb_prob", self.perturb_prob, 0.0 <= self.perturb_prob <= 1.0, "in [0, 1]"),
             ("lateral", self.lateral, 0.0 <= self.lateral <= 0.5, "in [0, 0.5]"),
+            ("lateral_at_bound", self.lateral_at_bound, 0.0 <= self.lateral_at_bound <= 1.0,
+             "in [0, 1]"),
             ("corner_cut_m", self.corner_cut_m, self.corner_cut_m >= 0.0, ">= 0"),
             ("coarse_points", [lo, hi], 2 <= lo <= hi, "[lo, hi] with 2 <= lo <= hi")])
 

@@ -75,13 +75,18 @@ def shift_sideways(route: jnp.ndarray, offset: jnp.ndarray) -> jnp.ndarray:
 def perturb(rng: jax.Array, line3: jnp.ndarray, cum: jnp.ndarray, width: jnp.ndarray,
             rc: RouteConfig) -> jnp.ndarray:
     """[K, 3] the route of one episode: with chance rc.perturb_prob the centre-line line3
-    [K, 3] (arc lengths cum [K]) made coarse, corner-cut and shifted, else line3 itself."""
+    [K, 3] (arc lengths cum [K]) made coarse, corner-cut and shifted (uniformly up to
+    rc.lateral of the width to either side, or with chance rc.lateral_at_bound by that bound
+    itself), else line3 itself."""
     k = jax.random.split(rng, 5)
     n = jax.random.randint(k[0], (), rc.coarse_points[0], rc.coarse_points[1] + 1)
     route = coarse(line3, cum, n)
     span = jax.random.uniform(k[1]) * rc.corner_cut_m
     route = cut_corners(route, span, jax.random.uniform(k[2]))
-    offset = jax.random.uniform(k[3], minval=-1.0, maxval=1.0) * rc.lateral * width
+    u = jax.random.uniform(k[3], minval=-1.0, maxval=1.0)
+    at_bound = jax.random.uniform(jax.random.fold_in(rng, 1)) < rc.lateral_at_bound
+    u = jnp.where(at_bound, jnp.sign(u), u)
+    offset = u * rc.lateral * width
     route = shift_sideways(route, offset)
     return jnp.where(jax.random.uniform(k[4]) < rc.perturb_prob, route, line3)
 

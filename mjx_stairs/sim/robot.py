@@ -109,9 +109,10 @@ PHYSICS = {
     "lean": {"terrain_contacts": "nearest", "shin_collision": False, "solver_iterations": 1,
              "ls_iterations": 3},
     "evaluation": {"terrain_contacts": "columns", "shin_collision": True, "solver_iterations": 8,
-                   "ls_iterations": 10, "sunk_exit": "nearest"},
+                   "ls_iterations": 10, "sunk_exit": "nearest", "timestep": 0.005},
     "evaluation_top": {"terrain_contacts": "columns", "shin_collision": True,
-                       "solver_iterations": 8, "ls_iterations": 10, "sunk_exit": "top"},
+                       "solver_iterations": 8, "ls_iterations": 10, "sunk_exit": "top",
+                       "timestep": 0.005},
 }
 """Physics presets, named by ``robot.physics = "..."`` in a config table or an override; each
 sets the collider, shin and solver fields (the evaluation presets also ``sunk_exit``), so a
@@ -123,7 +124,8 @@ nearest-point collider);
 "evaluation": the physics every policy is judged in (issue 19): the grid as columns with
 vertical risers (the CPU MuJoCo ground truth's geometry, `sim.contact.sphere_columns`), shin
 spheres, the solver run near convergence (8 Newton iterations, 10 line-search steps), a sphere
-centre sunk into a column pushed out through the column's nearest exposed face. Checked against
+centre sunk into a column pushed out through the column's nearest exposed face, a 5 ms physics
+step (an evaluation keeps the policy's control period: `study.evaluate.eval_env`). Checked against
 CPU MuJoCo on box stairs: within 3 points on 35 of the 36 cells of
 experiments/results/ground_truth/table.md, 3.8 on the last (2026-11-25);
 "evaluation_top": the evaluation physics as published to 2026-11-24, the sunk centre pushed out

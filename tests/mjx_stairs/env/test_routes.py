@@ -102,6 +102,25 @@ def test_perturbed_routes_stay_within_a_third_of_the_width(u_tiles):
         assert max(offsets) > width / 10  # routes are really moved
 
 
+def test_routes_drawn_at_the_bound_are_shifted_by_the_whole_third(u_tiles):
+    atlas, tiles = u_tiles
+    line = np.asarray(tiles.line3[0])
+    width = float(atlas.width[0])
+
+    def medians(at_bound: float) -> np.ndarray:
+        rc = RouteConfig(perturb_prob=1.0, lateral=1 / 3, corner_cut_m=0.0,
+                         coarse_points=(64, 64), lateral_at_bound=at_bound)
+        perturb = jax.jit(lambda k: routes.perturb(k, tiles.line3[0], tiles.line_cum[0],
+                                                   tiles.width[0], rc))
+        return np.array([np.median(_distance_to(np.asarray(perturb(jax.random.PRNGKey(s)))[:, :2],
+                                                line[:, :2])) for s in range(12)])
+
+    at = medians(1.0)
+    np.testing.assert_allclose(at, width / 3, atol=0.05 * width)  # every one at the bound
+    uniform = medians(0.0)
+    assert uniform.min() < 0.6 * width / 3  # the default draws inside it
+
+
 def test_an_episode_keeps_its_centreline_with_chance_one_minus_perturb_prob(u_tiles):
     _, tiles = u_tiles
     rc = RouteConfig(perturb_prob=0.5)
