@@ -20,7 +20,7 @@ sys.path.insert(0, "experiments/gpu")
 
 
 def main(rule: str, robots: int, cell: int, pol: str, seed: int = 0) -> None:
-    from fidelity import CELLS, OPTIONS, POLICIES
+    from fidelity import CELLS, KNOWN_POLICIES, OPTIONS
 
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study.evaluate import CellSpec, success_by_cell
@@ -28,7 +28,7 @@ def main(rule: str, robots: int, cell: int, pol: str, seed: int = 0) -> None:
     spec = CellSpec(cells=(CELLS[cell],), robots_per_cell=robots, physics="trained", seed=seed,
                     env_overrides=(*OPTIONS["evaluation"], f"robot.sunk_exit={rule}"))
     t0 = time.time()
-    r = success_by_cell({pol: load_policy(POLICIES[pol])}, spec)[pol]
+    r = success_by_cell({pol: load_policy(KNOWN_POLICIES[pol])}, spec)[pol]
     print(json.dumps(dict(rule=rule, cell=list(CELLS[cell]), policy=pol, robots=robots, seed=seed,
                           success=r["success"], fell=r["fell"],
                           wall_s=round(time.time() - t0), outcomes=r["outcomes"])))
