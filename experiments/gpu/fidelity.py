@@ -70,6 +70,15 @@ OPTIONS = {  # env overrides of each physics option
     "columns_noshin_n3": ("robot.terrain_contacts=columns", "robot.shin_collision=false",
                           "robot.solver_iterations=3", "robot.ls_iterations=5",
                           "robot.sunk_exit=nearest"),
+    # fewer line-search steps: under vmap MJX runs every one of them for every robot (a scan of
+    # lax.cond, which vmap turns into both branches), so a Newton iteration costs about
+    # ls_iterations line-search bodies whether or not the search has converged
+    "columns_n4_ls3": ("robot.physics=evaluation", "robot.solver_iterations=4",
+                       "robot.ls_iterations=3"),
+    "columns_n6_ls3": ("robot.physics=evaluation", "robot.solver_iterations=6",
+                       "robot.ls_iterations=3"),
+    "columns_n8_ls3": ("robot.physics=evaluation", "robot.solver_iterations=8",
+                       "robot.ls_iterations=3"),
     # ... and with a 10 ms physics step (PD and contacts at 100 Hz, 2 steps per 20 ms policy
     # step, half the physics of every candidate above; issue 22)
     "evaluation_dt10": ("robot.physics=evaluation", "robot.timestep=0.01", "decimation=2"),
