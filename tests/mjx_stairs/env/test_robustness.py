@@ -6,6 +6,7 @@ import types
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
 from mujoco import mjx
@@ -174,3 +175,41 @@ def test_robot_joint_damping_builds_into_the_model_and_the_ground_truth():
     assert damped[6:].tolist() == [2.0] * 12 and damped[:6].tolist() == [0.0] * 6
     boxes = box_world.build_model(np.zeros((0, 6)), two).dof_damping
     assert boxes.tolist() == damped.tolist()
+
+
+def _free_swing(implicit: bool, dt: float, damping: float) -> np.ndarray:
+    """[20, 12] joint angles every 5 ms of the Go2 in the air (no gravity, no contact) whose
+    joints start at 4 rad/s while the PD (as the ground truth's actuators) holds the nominal
+    pose, stepped at `dt`."""
+    cfg = rb.RobotConfig(joint_damping=damping, implicit_damping=implicit, timestep=dt)
+    m = box_world.build_model(np.zeros((0, 6)), cfg)
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_GRAVITY) | int(
+        mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    d = mujoco.MjData(m)
+    d.qpos[:] = rb.standing_qpos(z=1.0)
+    d.ctrl[:] = d.qpos[7:]
+    d.qvel[6:] = 4.0
+    every = int(round(0.005 / dt))
+    out = []
+    for k in range(20 * every):
+        mujoco.mj_step(m, d)
+        if (k + 1) % every == 0:
+            out.append(d.qpos[7:].copy())
+    return np.array(out)
+
+
+def test_implicit_damping_follows_the_continuous_joint_where_explicit_does_not():
+    for build in (lambda c: rb.build_mj_model(None, 0.5, c),
+                  lambda c: box_world.build_model(np.zeros((0, 6)), c)):
+        flags = {imp: build(rb.RobotConfig(implicit_damping=imp)).opt.disableflags
+                 & int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP) for imp in (False, True)}
+        assert flags[False] and not flags[True]
+    # at the Go2 description's damping 2 the explicit 5 ms step is 3x further from a 10 us step
+    # than the implicit one (measured 0.012 and 0.004 rad mean); at training's 0.1 alike
+    for damping, ratio in ((2.0, 2.0), (0.1, None)):
+        fine = _free_swing(False, 1e-5, damping)
+        err = {imp: np.abs(_free_swing(imp, 0.005, damping) - fine).mean() for imp in (False, True)}
+        if ratio:
+            assert err[False] > ratio * err[True], err
+        else:
+            assert abs(err[False] - err[True]) < 0.3 * err[False], err

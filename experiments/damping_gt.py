@@ -1,0 +1,93 @@
+"""Issue 25: a policy at the Go2 description's joint damping, MJX against MuJoCo itself.
+
+    JAX_PLATFORMS=cpu PYTHONPATH=. python experiments/damping_gt.py OUT \
+        --policy experiments/results/generalist/policy.npz --cell u_shaped:test:6 \
+        --robots 200 --configs d0.1,d2,d2i --what mjx,gt
+
+Each config sets the joints' passive damping (d2: 2 N m s/rad) and how it is integrated (a
+trailing i: implicitly, `robot.implicit_damping=true`; else explicitly, as go2.xml and training
+do). For each config: `mjx` evaluates the policy in MJX, the evaluation physics
+(`study.evaluate.success_by_cell`), `gt` in the CPU MuJoCo ground truth (box stairs, default
+solver: `study.ground_truth.success_in_ground_truth`), both from the same starts (seed). One JSON
+per (what, config) under OUT, skipped when there; each keeps every robot's outcome, so two
+configs compare episode by episode. Then OUT/table.md. Every evaluation runs in a process of its
+own (an MJX evaluation after a ground-truth one in the same process once hung on the 2-core CPU).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+
+def overrides(config: str) -> tuple[str, ...]:
+    implicit = config.endswith("i")
+    damping = float(config[1:-1] if implicit else config[1:])
+    if not config.startswith("d"):
+        raise SystemExit(f"config {config!r}: expected d<damping>[i], e.g. d2 or d2i")
+    return (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
+
+
+def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config: str,
+        what: str) -> dict:
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study.evaluate import CellSpec, success_by_cell
+    from mjx_stairs.study.ground_truth import success_in_ground_truth
+
+    path = out / f"{what}_{config}.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    policy = load_policy(policy_path)
+    spec = CellSpec(cells=(cell,), robots_per_cell=robots, seed=seed,
+                    env_overrides=overrides(config))
+    t0 = time.time()
+    rec = (success_by_cell({"p": policy}, spec)["p"] if what == "mjx"
+           else success_in_ground_truth(policy, spec))
+    rec.update(policy=policy_path, config=config, overrides=list(overrides(config)),
+               wall_s_total=time.time() - t0)
+    from mjx_stairs.atomic import write_text
+
+    write_text(path, json.dumps(rec, indent=1))
+    return rec
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--policy", required=True)
+    ap.add_argument("--cell", default="u_shaped:test:6", help="family:schedule:level (1-based)")
+    ap.add_argument("--robots", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--configs", default="d0.1,d2,d2i")
+    ap.add_argument("--what", default="mjx,gt")
+    a = ap.parse_args()
+    family, schedule, level = a.cell.split(":")
+    cell = (family, schedule, int(level) - 1)
+    a.out.mkdir(parents=True, exist_ok=True)
+    rows = ["| config | " + " | ".join(a.what.split(",")) + " |",
+            "|---|" + "---|" * len(a.what.split(","))]
+    for config in a.configs.split(","):
+        overrides(config)
+        row = []
+        for what in a.what.split(","):
+            with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+                r = pool.submit(run, a.out, a.policy, cell, a.robots, a.seed, config,
+                                what).result()
+            s, f = 100 * r["success"][0], 100 * r["fell"][0]
+            print(f"{what} {config}: {s:.1f} % success, {f:.1f} % falls "
+                  f"({r['wall_s_total']:.0f} s)", flush=True)
+            row.append(f"{s:.1f} ({f:.1f})")
+        rows.append(f"| {config} | " + " | ".join(row) + " |")
+    note = (f"\nsuccess % (falls %), {a.robots} robots, seed {a.seed}, {a.cell}, policy "
+            f"{a.policy}; mjx: the evaluation physics; gt: CPU MuJoCo on box stairs. d<x>: joint "
+            f"damping x N m s/rad integrated explicitly, d<x>i: implicitly.\n")
+    (a.out / "table.md").write_text("\n".join(rows) + "\n" + note)
+    print("\n".join(rows) + note)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,176 @@
+"""Issue 25: what makes a policy fail in sim2sim where MJX says it climbs, one change at a time.
+
+    JAX_PLATFORMS=cpu PYTHONPATH=. python experiments/sim2sim_causes.py OUT \
+        --onnx experiments/results/generalist/policy.onnx --cells up6,up5 \
+        --variants full,euler_explicit,no_head --episodes 50 --workers 2
+
+Each variant is one edit of the sim2sim robot (mjx_stairs/sim/assets/go2_full.xml: full collision
+geometry, the Go2 description's joint damping 2, armature 0.01, friction loss 0.2, implicitfast,
+MuJoCo's default solver), written to OUT/robots/<variant>.xml and passed to `mjx-stairs sim2sim`
+as `--robot`; or the training MJCF (assets/go2.xml: collision spheres only, semi-implicit Euler
+with the damping explicit, one Newton iteration) with one edit. Every variant of a cell walks the
+same starts (sim2sim's own, seed 0), so two variants are compared episode by episode. One JSON
+per (variant, cell) under OUT/<variant>/ (skipped when there: a killed run resumes), then
+OUT/table.md: success, falls and step-edge touches per variant and cell, and each variant's
+paired change against `full` (starts gained minus lost).
+
+Cells: up6 / down4 ... = U-shaped test level, direction (the family with --family).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+ASSETS = Path(__file__).resolve().parents[1] / "mjx_stairs" / "sim" / "assets"
+LEG_JOINTS = tuple(f"{leg}_{j}_joint" for leg in ("FL", "FR", "RL", "RR")
+                   for j in ("hip", "thigh", "calf"))
+
+
+def _joints(spec: mujoco.MjSpec, **fields) -> None:
+    for name in LEG_JOINTS:
+        j = spec.joint(name)
+        for k, v in fields.items():
+            setattr(j, k, [v, 0.0, 0.0] if k == "damping" else v)
+
+
+def _integrator(spec: mujoco.MjSpec, name: str, eulerdamp: bool = True) -> None:
+    spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{name.upper()}")
+    flag = int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP)
+    spec.option.disableflags = (spec.option.disableflags | flag if not eulerdamp
+                                else spec.option.disableflags & ~flag)
+
+
+def _drop_geoms(spec: mujoco.MjSpec, names) -> None:
+    for name in names:
+        spec.delete(spec.geom(name))
+
+
+def _default_solver(spec: mujoco.MjSpec) -> None:
+    spec.option.iterations, spec.option.ls_iterations = 100, 50
+
+
+HEAD = ("trunk_head_upper", "trunk_head_lower")
+VARIANTS = {  # name: (base MJCF, edit, what it changes)
+    "full": ("go2_full.xml", lambda s: None, "the sim2sim robot as it is"),
+    "damping01": ("go2_full.xml", lambda s: _joints(s, damping=0.1),
+                  "joint damping 0.1 (training's MJCF)"),
+    "no_frictionloss": ("go2_full.xml", lambda s: _joints(s, frictionloss=0.0),
+                        "no joint friction loss (training has none)"),
+    "euler": ("go2_full.xml", lambda s: _integrator(s, "euler"),
+              "semi-implicit Euler, damping implicit (eulerdamp on)"),
+    "euler_explicit": ("go2_full.xml", lambda s: _integrator(s, "euler", eulerdamp=False),
+                       "semi-implicit Euler, damping explicit (training's integrator)"),
+    "no_head": ("go2_full.xml", lambda s: _drop_geoms(s, HEAD),
+                "no head geoms (training's trunk spheres do not reach the head)"),
+    "train_geometry": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
+                                             _integrator(s, "implicitfast"), _default_solver(s)),
+                       "training's collision spheres, everything else as `full`"),
+    "eval_model": ("go2.xml", lambda s: (_joints(s, damping=2.0), _default_solver(s)),
+                   "training's MJCF (spheres, explicit Euler), damping 2, the solver converged "
+                   "(the ground truth's robot at damping 2)"),
+}
+
+
+def write_robot(variant: str, folder: Path) -> Path:
+    """OUT/robots/<variant>.xml: the variant's MJCF."""
+    base, edit, _ = VARIANTS[variant]
+    spec = mujoco.MjSpec.from_file(str(ASSETS / base))
+    edit(spec)
+    spec.compile()  # fails here, not in a worker
+    path = folder / "robots" / f"{variant}.xml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(spec.to_xml())
+    return path
+
+
+def parse_cell(cell: str) -> tuple[str, int]:
+    for d in ("up", "down"):
+        if cell.startswith(d) and cell[len(d):].isdigit():
+            return d, int(cell[len(d):])
+    raise SystemExit(f"cell {cell!r}: expected up<level> or down<level>, e.g. up6")
+
+
+def _job(args) -> str:
+    onnx, family, cell, robot, out, episodes, latency = args
+    from mjx_stairs.tools import sim2sim
+
+    direction, level = parse_cell(cell)
+    course = sim2sim.family_course(family, level, "test", direction)
+    r = sim2sim.run(onnx, course, sim2sim.Options(episodes=episodes, latency_ms=latency),
+                    robot=robot, out=out)
+    return f"{out}: {100 * r['success']:.1f} % success, {100 * r['fell']:.1f} % falls, " \
+           f"{r['wall_s']:.0f} s"
+
+
+def table(folder: Path, variants: list[str], cells: list[str]) -> str:
+    def load(v, c):
+        p = folder / v / f"{c}.json"
+        return json.loads(p.read_text()) if p.is_file() else None
+
+    head = "| variant | what changes | " + " | ".join(cells) + " |"
+    rows = [head, "|" + "---|" * (2 + len(cells))]
+    for v in variants:
+        row = []
+        for c in cells:
+            d, ref = load(v, c), load("full", c)
+            if d is None:
+                row.append("")
+                continue
+            s = f"{100 * d['success']:.0f} ({100 * d['fell']:.0f})"
+            if ref is not None and v != "full" and len(ref["records"]) == len(d["records"]):
+                a = np.array([r["success"] for r in ref["records"]])
+                b = np.array([r["success"] for r in d["records"]])
+                s += f" +{int((b & ~a).sum())}/-{int((a & ~b).sum())}"
+            e = d["edge_contacts_per_episode"]
+            s += f"; trunk {e['trunk']:.1f}, calf {e['calf']:.1f}"
+            row.append(s)
+        rows.append(f"| {v} | {VARIANTS[v][2]} | " + " | ".join(row) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--onnx", required=True)
+    ap.add_argument("--family", default="u_shaped")
+    ap.add_argument("--cells", default="up6")
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--episodes", type=int, default=50)
+    ap.add_argument("--latency-ms", type=float, default=0.0)
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    a = ap.parse_args()
+    variants, cells = a.variants.split(","), a.cells.split(",")
+    for v in variants:
+        if v not in VARIANTS:
+            raise SystemExit(f"unknown variant {v!r}; known: {', '.join(VARIANTS)}")
+    for c in cells:
+        parse_cell(c)
+    jobs = []
+    for v in variants:
+        robot = write_robot(v, a.out)
+        (a.out / v).mkdir(parents=True, exist_ok=True)
+        for c in cells:
+            out = a.out / v / f"{c}.json"
+            if not out.is_file():
+                jobs.append((a.onnx, a.family, c, str(robot), str(out), a.episodes, a.latency_ms))
+    with ProcessPoolExecutor(a.workers) as pool:
+        for line in pool.map(_job, jobs):
+            print(line, flush=True)
+    text = table(a.out, variants, cells)
+    note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell, {a.family} test levels, "
+            f"sim2sim's starts (seed 0), latency {a.latency_ms:g} ms; +gained/-lost: starts that "
+            "succeed with the variant and not with `full`, and the reverse; trunk, calf: "
+            f"step-edge touches per episode. Policy: {a.onnx}.\n")
+    (a.out / "table.md").write_text(text + note)
+    print(text + note)
+
+
+if __name__ == "__main__":
+    main()
