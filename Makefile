@@ -20,7 +20,7 @@ TEST_WORKERS ?= 2
 # of 5.8). Flags already in XLA_FLAGS come after these, so they win. bench keeps the defaults.
 CPU_XLA := $(if $(HAS_GPU),,XLA_FLAGS="--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1 $$XLA_FLAGS")
 
-.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-stage2-paper train-generalist ablation eval exp1 transfer-matrix bench clean-venv
+.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-stage2-paper train-stage2-robot train-generalist ablation eval exp1 transfer-matrix bench clean-venv
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -47,6 +47,9 @@ train-stage2-fast: $(SETUP)  # lean settings (issue 7): 417 k vs 187 k env steps
 
 train-stage2-paper: $(SETUP)  # issue 21: stage 2 as the paper has it (final goal drawn on the stairs, evaluation physics)
 	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/stage2_u_paper.toml $(ARGS)
+
+train-stage2-robot: $(SETUP)  # issue 25: stage 2 fine-tuned for a real Go2's joints (damping 0.1-2, implicit; 0-20 ms delay)
+	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/stage2_u_robot.toml $(ARGS)
 
 train-generalist: $(SETUP)  # issue 24: building stairs up and down, robust to a real Go2 (from stage 1)
 	$(CPU_XLA) $(PY) -m mjx_stairs train experiments/generalist.toml $(ARGS)

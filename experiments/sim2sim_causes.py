@@ -69,12 +69,15 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                        "semi-implicit Euler, damping explicit (training's integrator)"),
     "no_head": ("go2_full.xml", lambda s: _drop_geoms(s, HEAD),
                 "no head geoms (training's trunk spheres do not reach the head)"),
-    "train_geometry": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
-                                             _integrator(s, "implicitfast"), _default_solver(s)),
-                       "training's collision spheres, everything else as `full`"),
-    "eval_model": ("go2.xml", lambda s: (_joints(s, damping=2.0), _default_solver(s)),
-                   "training's MJCF (spheres, explicit Euler), damping 2, the solver converged "
-                   "(the ground truth's robot at damping 2)"),
+    "spheres": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
+                                      _integrator(s, "implicitfast"), _default_solver(s)),
+                "training's collision spheres, everything else as `full`"),
+    "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
+                                       _default_solver(s)),
+                 "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "
+                 "implicit, the solver converged"),
+    "gt_robot_explicit": ("go2.xml", lambda s: (_joints(s, damping=2.0), _default_solver(s)),
+                          "the same with the damping explicit (training's integrator)"),
 }
 
 

@@ -1,21 +1,29 @@
 """Issue 25's sim-to-sim table: a policy, exported to ONNX, in MuJoCo itself (full-geometry Go2,
-box stairs, observation from the sidecar; mjx_stairs.tools.sim2sim) on the U-shaped test levels
-1-6 and the `code` suite, N episodes per cell over a pool of CPU processes.
+box stairs, observation from the sidecar; mjx_stairs.tools.sim2sim) on the paper's test levels
+of any family (default U-shaped, 1-6), walked up or down, and the `code` suite, N episodes per
+cell over a pool of CPU processes.
 
     python experiments/gpu/sim2sim_table.py --policy experiments/results/stage2_u/policy.npz \\
         --out experiments/results/sim2sim/stage2_u --episodes 200 --workers 16 \\
         --mjx-json experiments/results/ground_truth/mjx/mjx_reference.json --mjx-policy stage2_u
+    python experiments/gpu/sim2sim_table.py --policy P --out OUT --cells u_shaped straight \\
+        --direction down --mjx \\
+        --mjx-column robot=robot.joint_damping=2.0,robot.implicit_damping=true
 
 Every cell's JSON (out/cells/<cell>.json: success, falls, step-edge contacts per episode, every
 episode) is written atomically as soon as its episodes are in; a rerun skips the cells already
 written (--force redoes them). out/table.md is rewritten after each cell.
 
-Starts: on the U-shaped cells, the robots start where `mjx-stairs eval` (study.evaluate.
-initial_states, same seed, `episodes` robots per cell, two variants per cell) starts them, on
-their own variant's tile, so that `--mjx` (the MJX evaluation of those very starts, run here
-first; use a GPU host) gives a paired gap. The code suite has no MJX evaluation yet: its starts
-are sim2sim's own (seeded, uniform on the spawn area). `--mjx-json` reads the MJX column from an
-earlier evaluation instead (not paired: its own robots).
+Starts: on a family's cells, the robots start where `mjx-stairs eval --family F --direction D
+--robots N --seed S` starts them (study.evaluate.success_by_level's resets: two variants per
+level), on their own variant's tile, so that `--mjx` (the MJX evaluation of those very starts in
+the evaluation physics, run here first; use a GPU host) gives a paired gap. Each `--mjx-column
+NAME=KEY=VALUE,...` adds an MJX column of the same starts with those env overrides, e.g. the
+sim2sim robot's joints (`robot.joint_damping=2.0,robot.implicit_damping=true`: go2_full.xml's
+damping, integrated implicitly as MuJoCo does), which separates the simulator from the robot.
+The code suite has no MJX evaluation yet: its starts are sim2sim's own (seeded, uniform on the
+spawn area). `--mjx-json` reads the MJX column from an earlier evaluation instead (not paired:
+its own robots; U-shaped, up).
 
 Robustness and cause-finding: --latency-ms, --noise, --push, --robot FILE.xml pass through to
 every episode (write each variant to its own --out).
@@ -39,24 +47,26 @@ sys.path.insert(0, str(ROOT))
 from mjx_stairs import atomic  # noqa: E402
 from mjx_stairs.tools import sim2sim as s2s  # noqa: E402
 
-U_CELLS = tuple(("u_shaped", "test", lv) for lv in range(6))  # 0-based levels
+FAMILIES = ("u_shaped", "straight", "l_shaped", "spiral")
+SCHEDULE = "test"
 
 
-def cell_name(family: str, schedule: str, level: int) -> str:
-    return f"{family}_{schedule}_L{level + 1}"
+def cell_name(family: str, schedule: str, level: int, direction: str = "up") -> str:
+    """u_shaped_test_L3 (0-based level 2, up), u_shaped_test_down_L3 (down)."""
+    return f"{family}_{schedule}{'' if direction == 'up' else '_' + direction}_L{level + 1}"
 
 
 @functools.lru_cache(maxsize=8)
 def course_of(spec: tuple) -> s2s.Course:
-    """("family", family, schedule, level, variant, resolution, tile_size) or ("case", suite,
-    case name, resolution) -> the course (cached per worker process)."""
+    """("family", family, schedule, level, variant, resolution, tile_size, direction) or
+    ("case", suite, case name, resolution) -> the course (cached per worker process)."""
     import terrains
     from terrains.suites import load_suite
 
     if spec[0] == "family":
-        _, fam, sched, lv, variant, res, size = spec
-        tile = terrains.make_tile(fam, lv, variant, sched, res, size)
-        return s2s.tile_course(tile, f"{cell_name(fam, sched, lv)}_{variant}")
+        _, fam, sched, lv, variant, res, size, direction = spec
+        tile = terrains.make_tile(fam, lv, variant, sched, res, size, direction=direction)
+        return s2s.tile_course(tile, f"{cell_name(fam, sched, lv, direction)}_{variant}")
     _, suite, name, res = spec
     (case,) = [c for c in load_suite(suite) if c.name == name]
     return s2s.tile_course(case.tile(res), name)
@@ -69,25 +79,32 @@ def run_task(task: tuple) -> tuple[str, list[dict]]:
     return cell, r["records"]
 
 
-def family_starts(policy_path: Path, episodes: int, seed: int, resolution: float,
-                  tile_size: float) -> dict[str, list[tuple[str, np.ndarray]]]:
-    """{cell: [(variant, poses [n, 3] x, y, yaw in its tile frame)]}: `mjx-stairs eval`'s
-    starts of the U-shaped cells, grouped by the variant tile each robot is on."""
+def eval_spec(args, family: str, overrides: tuple[str, ...] = ()):
+    from mjx_stairs.study.specs import EvalSpec
+
+    return EvalSpec(family=family, schedule=SCHEDULE, direction=args.direction,
+                    levels=tuple(args.levels), robots_per_level=args.episodes, seed=args.seed,
+                    resolution=args.resolution, tile_size=10.0, env_overrides=overrides)
+
+
+def family_starts(policy_path: Path, spec) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """{cell: [(variant, poses [n, 3] x, y, yaw in its tile frame)]}: the starts of `mjx-stairs
+    eval` (study.evaluate.success_by_level's resets of the EvalSpec `spec`) on each level of its
+    family, grouped by the variant tile each robot is on."""
     import terrains
     from mjx_stairs.rl.policy import load_policy
-    from mjx_stairs.study.evaluate import CellSpec, cell_env, initial_states
+    from mjx_stairs.study.evaluate import level_states, make_eval_env
 
-    spec = CellSpec(cells=U_CELLS, robots_per_cell=episodes, seed=seed, resolution=resolution,
-                    tile_size=tile_size)
-    env = cell_env(load_policy(policy_path), spec)
-    state = initial_states(env, spec)
+    env, levels = make_eval_env(load_policy(policy_path), spec)
+    n = spec.robots_per_level
+    state = level_states(env, len(levels), spec)
     qpos, tile = np.asarray(state.pipeline_state.qpos), np.asarray(state.info["tile"])
     origin = np.asarray(env.tile_origin)
-    cols = len(origin) // len(U_CELLS)  # variants per cell
+    cols = len(origin) // len(levels)  # variants per level
+    names = terrains.variants(spec.family)
     out: dict[str, list[tuple[str, np.ndarray]]] = {}
-    for i, (fam, sched, lv) in enumerate(U_CELLS):
-        names = terrains.variants(fam)
-        rows = slice(i * episodes, (i + 1) * episodes)
+    for i, lv in enumerate(levels):
+        rows = slice(i * n, (i + 1) * n)
         groups = []
         for col in range(cols):
             mine = tile[rows] == i * cols + col
@@ -95,7 +112,7 @@ def family_starts(policy_path: Path, episodes: int, seed: int, resolution: float
             yaw = 2 * np.arctan2(q[:, 6], q[:, 3])
             xy = q[:, :2] - origin[i * cols + col]
             groups.append((names[col % len(names)], np.column_stack([xy, yaw])))
-        out[cell_name(fam, sched, lv)] = groups
+        out[cell_name(spec.family, SCHEDULE, lv, spec.direction)] = groups
     return out
 
 
@@ -110,12 +127,13 @@ def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
             out.append((cell, spec, poses[k:k + args.chunk], {**opts, "seed": args.seed + k},
                         str(onnx), args.robot))
 
-    if "u_shaped" in args.cells:
-        starts = family_starts(args.policy, args.episodes, args.seed, args.resolution, 10.0)
-        for (fam, sched, lv) in U_CELLS:
-            cell = cell_name(fam, sched, lv)
-            for variant, poses in ([] if cell in done else starts[cell]):
-                chunks(cell, ("family", fam, sched, lv, variant, args.resolution, 10.0), poses)
+    for fam in (c for c in args.cells if c in FAMILIES):
+        starts = family_starts(args.policy, eval_spec(args, fam))
+        for cell, groups in starts.items():
+            lv = int(cell.rsplit("_L", 1)[1]) - 1
+            for variant, poses in ([] if cell in done else groups):
+                chunks(cell, ("family", fam, SCHEDULE, lv, variant, args.resolution, 10.0,
+                              args.direction), poses)
     if "code" in args.cells:
         from mjx_stairs.tools import contract as ct
         from terrains.suites import load_suite
@@ -129,49 +147,65 @@ def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
     return out
 
 
-def mjx_column(args, out: Path) -> dict[str, float]:
-    """{cell: MJX success}: run here on the same starts (--mjx), or read (--mjx-json)."""
-    if args.mjx:
+def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
+    """{column: {cell: MJX success}}: "MJX" in the evaluation physics (--mjx) and one column per
+    --mjx-column, each on the same starts (run here, cached in out/mjx*.json), or "MJX" read from
+    an earlier evaluation (--mjx-json)."""
+    cols: dict[str, dict[str, float]] = {}
+    runs = ([("MJX", ())] if args.mjx else []) + [
+        (name, tuple(o for o in rest.split(",") if o)) for name, _, rest in
+        (c.partition("=") for c in args.mjx_column)]
+    for name, overrides in runs:
         from mjx_stairs.rl.policy import load_policy
-        from mjx_stairs.study.evaluate import CellSpec, success_by_cell
+        from mjx_stairs.study.evaluate import success_by_level
 
-        path = out / "mjx.json"
-        if not path.exists():
-            spec = CellSpec(cells=U_CELLS, robots_per_cell=args.episodes, seed=args.seed,
-                            resolution=args.resolution)
-            r = success_by_cell({"policy": load_policy(args.policy)}, spec)["policy"]
-            atomic.write_text(path, json.dumps(r, indent=1) + "\n")
-        r = json.loads(path.read_text())
-    elif args.mjx_json:
+        col = cols.setdefault(name, {})
+        for fam in (c for c in args.cells if c in FAMILIES):
+            tag = "" if name == "MJX" else f"_{name}"
+            path = out / f"mjx{tag}_{fam}_{args.direction}.json"
+            if not path.exists():
+                r = success_by_level(load_policy(args.policy), eval_spec(args, fam, overrides))
+                atomic.write_text(path, json.dumps(r, indent=1) + "\n")
+            r = json.loads(path.read_text())
+            col.update({cell_name(fam, SCHEDULE, lv - 1, args.direction): s
+                        for lv, s in zip(r["levels"], r["success"], strict=True)})
+    if args.mjx_json:
         r = json.loads(Path(args.mjx_json).read_text())
         r = r["policies"][args.mjx_policy] if "policies" in r else r
-    else:
-        return {}
-    return {cell_name(c["family"], c["schedule"], c["level"] - 1): s
-            for c, s in zip(r["cells"], r["success"], strict=True)}
+        cols["MJX"] = {cell_name(c["family"], c["schedule"], c["level"] - 1): s
+                       for c, s in zip(r["cells"], r["success"], strict=True)}
+    return cols
 
 
 def write_cell(out: Path, cell: str, records: list[dict], args) -> None:
     records = sorted(records, key=lambda r: r["start"])
     result = {"cell": cell, **s2s.summarise(records), "policy": str(args.policy),
-              "robot": args.robot or "go2_full.xml (ours)", "latency_ms": args.latency_ms,
+              "robot": args.robot or "go2_full.xml (ours)", "direction": args.direction,
+              "latency_ms": args.latency_ms,
               "noise": args.noise, "push": args.push, "episode_s": args.episode_s,
               "seed": args.seed, "resolution": args.resolution, "records": records}
     atomic.write_text(out / "cells" / f"{cell}.json", json.dumps(result, indent=1) + "\n")
 
 
-def write_table(out: Path, mjx: dict[str, float]) -> None:
-    rows = ["| cell | episodes | sim2sim success | fell | MJX success | gap (MJX - sim2sim) "
-            "| trunk | hip | thigh | calf |", "|---|---|---|---|---|---|---|---|---|---|"]
+def write_table(out: Path, mjx: dict[str, dict[str, float]]) -> None:
+    """out/table.md: every cell file, with each MJX column and the gap to the first of them."""
+    names = list(mjx)
+    head = ["cell", "episodes", "sim2sim success", "fell"] + [f"{n} success" for n in names]
+    if names:
+        head.append(f"gap ({names[0]} - sim2sim)")
+    head += ["trunk", "hip", "thigh", "calf"]
+    rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for f in sorted((out / "cells").glob("*.json")):
         r = json.loads(f.read_text())
-        m, s = mjx.get(r["cell"]), r["success"]
+        s = r["success"]
+        vals = [mjx[n].get(r["cell"]) for n in names]
+        cells = [r["cell"], str(r["episodes"]), f"{100 * s:.1f}", f"{100 * r['fell']:.1f}"]
+        cells += ["–" if m is None else f"{100 * m:.1f}" for m in vals]
+        if names:
+            cells.append("–" if vals[0] is None else f"{100 * (vals[0] - s):+.1f}")
         e = r["edge_contacts_per_episode"]
-        ms, gap = ("–", "–") if m is None else (f"{100 * m:.1f}", f"{100 * (m - s):+.1f}")
-        rows.append(
-            f"| {r['cell']} | {r['episodes']} | {100 * s:.1f} | {100 * r['fell']:.1f} | {ms} | "
-            f"{gap} | " + " | ".join(f"{e[k]:.2f}" for k in ("trunk", "hip", "thigh", "calf"))
-            + " |")
+        cells += [f"{e[k]:.2f}" for k in ("trunk", "hip", "thigh", "calf")]
+        rows.append("| " + " | ".join(cells) + " |")
     rows.append("\nSuccess and falls in % of the episodes; trunk/hip/thigh/calf: touches of a "
                 "step edge per episode (mjx_stairs.tools.sim2sim).")
     atomic.write_text(out / "table.md", "\n".join(rows) + "\n")
@@ -182,7 +216,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--policy", type=Path, default=ROOT / "experiments/results/stage2_u/policy.npz")
     p.add_argument("--out", type=Path, default=ROOT / "experiments/results/sim2sim/stage2_u")
     p.add_argument("--cells", nargs="+", default=["u_shaped", "code"],
-                   choices=["u_shaped", "code"])
+                   choices=[*FAMILIES, "code"], help="families (their test levels) and/or code")
+    p.add_argument("--direction", default="up", choices=["up", "down"],
+                   help="the families' staircases walked up or down")
+    p.add_argument("--levels", type=lambda v: [int(x) - 1 for x in v.split(",")], default=[],
+                   help="1-based test levels, e.g. 4,5,6 (default all)")
     p.add_argument("--episodes", type=int, default=200, help="episodes per cell")
     p.add_argument("--workers", type=int, default=16)
     p.add_argument("--chunk", type=int, default=10, help="episodes per task")
@@ -194,7 +232,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--push", action="store_true")
     p.add_argument("--robot", default=None, help="a Go2 MJCF (default: ours, full geometry)")
     p.add_argument("--mjx", action="store_true", help="run the MJX evaluation of the same "
-                   "starts first (U-shaped cells; a GPU host)")
+                   "starts first (family cells; a GPU host)")
+    p.add_argument("--mjx-column", action="append", default=[], metavar="NAME=KEY=VALUE,...",
+                   help="another MJX column of the same starts with these env overrides")
     p.add_argument("--mjx-json", default=None, help="MJX success from an earlier evaluation")
     p.add_argument("--mjx-policy", default="stage2_u", help="its policy name")
     p.add_argument("--force", action="store_true", help="redo cells already written")
@@ -207,7 +247,7 @@ def main(argv: list[str] | None = None) -> None:
 
         export.export(args.policy, onnx)
     done = set() if args.force else {f.stem for f in (out / "cells").glob("*.json")}
-    mjx = mjx_column(args, out)
+    mjx = mjx_columns(args, out)
     tasks = tasks_for(args, onnx, done)
     left: dict[str, int] = {}
     for t in tasks:

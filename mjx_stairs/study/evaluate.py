@@ -118,6 +118,15 @@ def physics_settings(env: StairEnv) -> dict[str, Any]:
             "decimation": env.config.decimation}
 
 
+def level_states(env: StairEnv, n_levels: int, spec: EvalSpec):
+    """[n_levels * robots_per_level] robots on the env's level rows (row-major by level), reset
+    from `spec.seed`: where `success_by_level` starts them (sim2sim's paired starts too)."""
+    B = n_levels * spec.robots_per_level
+    row = jnp.repeat(jnp.arange(n_levels, dtype=jnp.int32), spec.robots_per_level)
+    keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
+    return jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
+
+
 def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     """Run robots_per_level robots on every level for one episode each.
 
@@ -125,10 +134,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     """
     env, levels = make_eval_env(policy, spec)
     n_levels = len(levels)
-    B = n_levels * spec.robots_per_level
-    row = jnp.repeat(jnp.arange(n_levels, dtype=jnp.int32), spec.robots_per_level)
-    keys = jax.random.split(jax.random.PRNGKey(spec.seed), B)
-    state = jax.jit(jax.vmap(env.reset_at))(keys, row, jnp.zeros(B, jnp.int32))
+    state = level_states(env, n_levels, spec)
     t0 = time.time()
     finished, succeeded, fell, _ = jax.device_get(
         jax.jit(lambda s: first_episodes(env, policy, s))(state))

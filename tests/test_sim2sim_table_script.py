@@ -1,0 +1,53 @@
+"""experiments/gpu/sim2sim_table.py (issue 25's table): a family walked down, from the starts of
+`mjx-stairs eval`, with an MJX column of the same starts beside sim2sim's."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import terrains
+
+ROOT = Path(__file__).resolve().parents[1]
+POLICY = ROOT / "experiments/results/stage2_u/policy.npz"
+sys.path.insert(0, str(ROOT / "experiments/gpu"))  # importable by name in its spawned workers
+import sim2sim_table as table  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("s2s")
+    table.main(["--policy", str(POLICY), "--out", str(out), "--cells", "straight",
+                "--direction", "down", "--levels", "2", "--episodes", "4", "--workers", "1",
+                "--chunk", "2", "--episode-s", "0.4", "--mjx-column",
+                "robot=robot.joint_damping=2.0,robot.implicit_damping=true"])
+    return out
+
+
+def test_the_down_cell_starts_where_eval_starts_its_robots(out):
+    cell = json.loads((out / "cells" / "straight_test_down_L2.json").read_text())
+    assert cell["direction"] == "down" and cell["episodes"] == 4
+    args = table.main.__globals__["argparse"].Namespace(
+        direction="down", levels=[1], episodes=4, seed=0, resolution=0.025)
+    groups = table.family_starts(POLICY, table.eval_spec(args, "straight"))
+    want = np.concatenate([poses for _, poses in groups["straight_test_down_L2"]])
+    got = np.array([r["start"] for r in cell["records"]])
+    np.testing.assert_allclose(got[np.lexsort(got.T[::-1])], want[np.lexsort(want.T[::-1])],
+                               atol=1e-5)
+    # walked down: every robot starts on its tile's top landing, the floor far below
+    for variant, poses in groups["straight_test_down_L2"]:
+        tile = terrains.make_tile("straight", 1, variant, "test", 0.025, 10.0, direction="down")
+        top = tile.height_at(poses[:, 0], poses[:, 1])
+        assert np.all(np.asarray(top) > 0.1 + np.min(tile.heights)), variant
+
+
+def test_the_table_has_the_mjx_column_of_those_starts(out):
+    mjx = json.loads((out / "mjx_robot_straight_down.json").read_text())
+    assert mjx["direction"] == "down" and mjx["levels"] == [2]
+    assert mjx["env_overrides"] == ["robot.joint_damping=2.0", "robot.implicit_damping=true"]
+    assert mjx["physics_settings"]["terrain_contacts"] == "columns"  # the evaluation physics
+    rows = (out / "table.md").read_text().splitlines()
+    assert "robot success" in rows[0] and "gap (robot - sim2sim)" in rows[0]
+    assert rows[2].startswith("| straight_test_down_L2 | 4 |")
