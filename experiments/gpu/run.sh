@@ -26,7 +26,9 @@
 # stage 2 trained in one physics option, judged in the evaluation physics), warp (MuJoCo Warp's
 # speed and success), gpus, pack; and on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
-# sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md). Each training step stops and
+# sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md), stage2-robot and
+# sim2sim-policy (issue 25: stage 2 for a real Go2's joints, a policy's sim-to-sim table with MJX
+# columns of the same starts). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -400,6 +402,25 @@ run_step() {
       background "sim2sim/$name" python3 experiments/gpu/sim2sim_table.py --cells u_shaped \
         --episodes "${S2S_EPISODES:-$eps}" --workers "${S2S_WORKERS:-14}" \
         --out "$BG/sim2sim/$name" "${s2s[@]}" ;;
+    # issue 25: stage 2 fine-tuned for a real Go2's joints (experiments/stage2_u_robot.toml:
+    # damping 0.1-2 N m s/rad integrated implicitly, 0-20 ms delay; from stage2_u's policy)
+    stage2-robot) train stage2_u_robot experiments/stage2_u_robot.toml ;;
+    # issue 25: a policy's sim-to-sim table (S2S_POLICY: a run trained in this command or carried
+    # in .carry/, default stage2_u_robot) on the paper's test levels (S2S_CELLS, default u_shaped;
+    # S2S_DIRECTION up|down), S2S_EPISODES (200) per level: its two MJX columns of the very starts
+    # here on the GPU first (the evaluation physics; "robot": the sim2sim robot's joints, damping
+    # 2 integrated implicitly), then sim2sim on the host's CPUs in the background, into
+    # $OUT/sim2sim/<policy>_<direction>/
+    sim2sim-policy)
+      name=${S2S_POLICY:-stage2_u_robot}; dir=${S2S_DIRECTION:-up}
+      p=/tmp/policies/$name.npz; [ -f "$p" ] || p=.carry/$name/policy.npz
+      d="$BG/sim2sim/${name}_$dir"; mkdir -p "$d"
+      s2s=(--policy "$p" --out "$d" --cells ${S2S_CELLS:-u_shaped} --direction "$dir"
+           --episodes "${S2S_EPISODES:-200}" --mjx
+           --mjx-column "robot=robot.joint_damping=2.0,robot.implicit_damping=true")
+      python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" --mjx-only 2>&1 | grep -v warp
+      background "sim2sim/${name}_$dir" python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" \
+        --workers "${S2S_WORKERS:-14}" ;;
     # issue 19: tables of the reference physics re-evaluated in the evaluation physics (every
     # evaluation's default), 1000 robots per cell: transfer-eval, the lean transfer matrix (Tables
     # 1-2, experiments/results/transfer_lean/models.toml) into $OUT/transfer_lean_eval; rq1-eval,

@@ -235,6 +235,8 @@ def main(argv: list[str] | None = None) -> None:
                    "starts first (family cells; a GPU host)")
     p.add_argument("--mjx-column", action="append", default=[], metavar="NAME=KEY=VALUE,...",
                    help="another MJX column of the same starts with these env overrides")
+    p.add_argument("--mjx-only", action="store_true", help="compute the MJX columns (cached in "
+                   "--out) and stop: a GPU host runs them, then sim2sim on its CPUs")
     p.add_argument("--mjx-json", default=None, help="MJX success from an earlier evaluation")
     p.add_argument("--mjx-policy", default="stage2_u", help="its policy name")
     p.add_argument("--force", action="store_true", help="redo cells already written")
@@ -248,6 +250,8 @@ def main(argv: list[str] | None = None) -> None:
         export.export(args.policy, onnx)
     done = set() if args.force else {f.stem for f in (out / "cells").glob("*.json")}
     mjx = mjx_columns(args, out)
+    if args.mjx_only:
+        return
     tasks = tasks_for(args, onnx, done)
     left: dict[str, int] = {}
     for t in tasks:
