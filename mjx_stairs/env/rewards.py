@@ -33,7 +33,7 @@ class Quantities(NamedTuple):
     joint_lower: jnp.ndarray  # [12] soft position limits
     joint_upper: jnp.ndarray  # [12]
     joint_vel_limit: jnp.ndarray  # [] soft velocity limit
-    trunk_contacts: jnp.ndarray  # [4] bool, trunk-corner spheres touching the terrain
+    trunk_contacts: jnp.ndarray  # [4] bool, trunk-corner spheres touching the terrain (+ head: [5])
     knee_contacts: jnp.ndarray  # [4] bool, knee (thigh end) spheres
     shin_contacts: jnp.ndarray  # [4] bool, mid-shin (calf) spheres
     first_contact: jnp.ndarray  # [4] bool, a foot touched down this step

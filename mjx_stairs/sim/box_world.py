@@ -76,6 +76,8 @@ def build_model(
     for name in rb.SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
     rb.set_joint_damping(spec, config)
+    if config.head_collision:
+        rb.add_head(spec)
     if not config.shin_collision:
         for name in rb.SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0

@@ -107,6 +107,7 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         "joint_damping_nms_rad": list(r.joint_damping) if r.enabled and r.joint_damping
         else [damping, damping],
         "joint_damping_integration": "implicit" if cfg.robot.implicit_damping else "explicit",
+        "head_collision": cfg.robot.head_collision,
         "action_delay_s": list(r.action_delay_s) if r.enabled else [0.0, 0.0],
         "pushes": None if not (r.enabled and r.push_interval_s > 0) else {
             "interval_s": r.push_interval_s, "velocity_m_s": r.push_velocity,

@@ -133,3 +133,36 @@ def test_foot_pressed_into_step_is_pushed_out(terrain_contacts):
     bottoms = [data.geom_xpos[g][2] - 0.022 for g in feet]
     assert min(bottoms) > 0.10 - 0.006, bottoms  # pushed back out of the step
     assert np.any(np.asarray(d._impl.contact.dist) < 1e-3)  # through heightfield contacts
+
+
+def test_the_head_sphere_is_a_trunk_sphere_where_configured():
+    """robot.head_collision: the head (assets/go2_full.xml's lower head sphere) touches the
+    terrain in MJX (our columns collider) and in the ground truth's box world, as a trunk
+    sphere; without it the trunk is the four corners of go2.xml."""
+    from mjx_stairs.sim import box_world
+
+    heights = np.zeros((41, 41), np.float32)
+    plain = rb.build_mj_model(heights, 0.25, rb.RobotConfig(terrain_contacts="columns"))
+    assert len(rb.robot_ids(plain).trunk_geoms) == 4
+    assert mujoco.mj_name2id(plain, mujoco.mjtObj.mjOBJ_GEOM, rb.HEAD[0]) == -1
+    cfg = rb.RobotConfig(terrain_contacts="columns", head_collision=True)
+    model = rb.build_mj_model(heights, 0.25, cfg)
+    ids = rb.robot_ids(model)
+    head = model.geom(rb.HEAD[0])
+    assert ids.trunk_geoms[-1] == head.id and len(ids.trunk_geoms) == 5
+    assert head.size[0] == rb.HEAD[2] and head.bodyid[0] == ids.base_body
+    np.testing.assert_allclose(model.body_mass, plain.body_mass)  # collision only
+    # level, the head's bottom 1 cm into the floor, the trunk corners 2.7 cm above it
+    qpos = rb.standing_qpos((5.0, 5.0), rb.HEAD[2] - rb.HEAD[1][2] - 0.01)
+    d = jax.jit(mjx.forward)(mjx.put_model(model), mjx.make_data(model).replace(
+        qpos=jnp.asarray(qpos)))
+    touching = rb.sphere_contacts(d, rb.sphere_contact_rows(model, ids))["trunk"]
+    assert np.asarray(touching).tolist() == [False] * 4 + [True]
+    # the ground truth's robot: the same sphere against a box top
+    world = box_world.build_model(np.array([[5.3, 5.0, -0.05, 0.2, 0.2, 0.05]]), cfg)
+    data = mujoco.MjData(world)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(world, data)
+    pairs = {world.geom(int(g)).name for g in data.contact.geom1[:data.ncon]} | {
+        world.geom(int(g)).name for g in data.contact.geom2[:data.ncon]}
+    assert rb.HEAD[0] in pairs and not pairs & set(rb.SPHERE_GROUPS["trunk"])
