@@ -48,6 +48,9 @@ def test_the_table_has_the_mjx_column_of_those_starts(out):
     assert mjx["direction"] == "down" and mjx["levels"] == [2]
     assert mjx["env_overrides"] == ["robot.joint_damping=2.0", "robot.implicit_damping=true"]
     assert mjx["physics_settings"]["terrain_contacts"] == "columns"  # the evaluation physics
+    settings = mjx["physics_settings"]
+    assert (settings["joint_damping"], settings["implicit_damping"]) == (2.0, True)
+    assert settings["head_collision"] is False  # stage2_u's robot
     rows = (out / "table.md").read_text().splitlines()
     assert "robot success" in rows[0] and "gap (robot - sim2sim)" in rows[0]
     assert rows[2].startswith("| straight_test_down_L2 | 4 |")

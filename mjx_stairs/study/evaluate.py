@@ -114,8 +114,12 @@ def physics_settings(env: StairEnv) -> dict[str, Any]:
     """The robot physics an evaluation ran in (the fields the evaluation preset sets), resolved
     from its preset: a record says what its numbers mean even after a preset's name is given to
     other settings."""
-    return {**{k: getattr(env.config.robot, k) for k in PHYSICS["evaluation"]},
-            "decimation": env.config.decimation}
+    robot = env.config.robot
+    return {**{k: getattr(robot, k) for k in PHYSICS["evaluation"]},
+            "decimation": env.config.decimation,
+            # the robot's own, from the policy's config (or an override): not the preset's
+            "joint_damping": robot.joint_damping, "implicit_damping": robot.implicit_damping,
+            "head_collision": robot.head_collision}
 
 
 def level_states(env: StairEnv, n_levels: int, spec: EvalSpec):
