@@ -271,3 +271,7 @@ def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
     assert v["mujoco"] == mujoco.__version__ and v["jax"] == jax.__version__
     assert v["mjx_stairs"] == importlib.metadata.version("mjx_stairs") and v["python"]
     assert c.kp == side["pd"]["kp"] and c.control_dt == pytest.approx(0.02)
+    # the robot it trained as: the MJCF's damping, integrated explicitly, no head (defaults)
+    t = side["training"]
+    assert t["joint_damping_nms_rad"] == [0.1, 0.1]
+    assert t["joint_damping_integration"] == "explicit" and t["head_collision"] is False
