@@ -22,7 +22,9 @@ import os
 import shutil
 import tempfile
 
-_FLAGS = {"--xla_backend_optimization_level": "0", "--xla_cpu_use_fusion_emitters": "false"}
+_FLAGS = {"--xla_backend_optimization_level": "0", "--xla_cpu_use_fusion_emitters": "false",
+          # mjx_stairs/__init__.py says why (two batched Cholesky calls at once deadlock)
+          "--xla_cpu_enable_concurrency_optimized_scheduler": "false"}
 for _flag, _value in _FLAGS.items():
     if _flag not in os.environ.get("XLA_FLAGS", ""):
         os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}={_value}".strip()
