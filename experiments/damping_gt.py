@@ -11,7 +11,8 @@ do). For each config: `mjx` evaluates the policy in MJX, the evaluation physics
 solver: `study.ground_truth.success_in_ground_truth`), both from the same starts (seed). One JSON
 per (what, config) under OUT, skipped when there; each keeps every robot's outcome, so two
 configs compare episode by episode. Then OUT/table.md. Every evaluation runs in a process of its
-own (an MJX evaluation after a ground-truth one in the same process once hung on the 2-core CPU).
+own (one compiled program at a time; the published tables ran with XLA_FLAGS="--xla_cpu_use_
+fusion_emitters=false --xla_backend_optimization_level=1", as make's CPU targets).
 """
 
 from __future__ import annotations
