@@ -11,8 +11,9 @@ do). For each config: `mjx` evaluates the policy in MJX, the evaluation physics
 solver: `study.ground_truth.success_in_ground_truth`), both from the same starts (seed). One JSON
 per (what, config) under OUT, skipped when there; each keeps every robot's outcome, so two
 configs compare episode by episode. Then OUT/table.md. Every evaluation runs in a process of its
-own (one compiled program at a time; the published tables ran with XLA_FLAGS="--xla_cpu_use_
-fusion_emitters=false --xla_backend_optimization_level=1", as make's CPU targets).
+own (one compiled program at a time; the committed tables ran with XLA_FLAGS="--xla_cpu_use_
+fusion_emitters=false --xla_backend_optimization_level=1", as make's CPU targets, but for
+damping/generalist_u_test_6/mjx_d2.json, at XLA's defaults).
 """
 
 from __future__ import annotations
