@@ -28,9 +28,12 @@ from pathlib import Path
 
 def overrides(config: str) -> tuple[str, ...]:
     implicit = config.endswith("i")
-    damping = float(config[1:-1] if implicit else config[1:])
-    if not config.startswith("d"):
-        raise SystemExit(f"config {config!r}: expected d<damping>[i], e.g. d2 or d2i")
+    try:
+        if not config.startswith("d"):
+            raise ValueError
+        damping = float(config[1:-1] if implicit else config[1:])
+    except ValueError:
+        raise SystemExit(f"config {config!r}: expected d<damping>[i], e.g. d2 or d2i") from None
     return (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
 
 

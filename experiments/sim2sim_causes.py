@@ -28,13 +28,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-ASSETS = Path(__file__).resolve().parents[1] / "mjx_stairs" / "sim" / "assets"
-LEG_JOINTS = tuple(f"{leg}_{j}_joint" for leg in ("FL", "FR", "RL", "RR")
-                   for j in ("hip", "thigh", "calf"))
+from mjx_stairs.sim.robot import ASSET, JOINT_NAMES
+
+ASSETS = ASSET.parent
 
 
 def _joints(spec: mujoco.MjSpec, **fields) -> None:
-    for name in LEG_JOINTS:
+    for name in JOINT_NAMES:
         j = spec.joint(name)
         for k, v in fields.items():
             setattr(j, k, [v, 0.0, 0.0] if k == "damping" else v)

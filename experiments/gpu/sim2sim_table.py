@@ -155,16 +155,18 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
     runs = ([("MJX", ())] if args.mjx else []) + [
         (name, tuple(o for o in rest.split(",") if o)) for name, _, rest in
         (c.partition("=") for c in args.mjx_column)]
+    policy = None
     for name, overrides in runs:
-        from mjx_stairs.rl.policy import load_policy
-        from mjx_stairs.study.evaluate import success_by_level
-
         col = cols.setdefault(name, {})
         for fam in (c for c in args.cells if c in FAMILIES):
             tag = "" if name == "MJX" else f"_{name}"
             path = out / f"mjx{tag}_{fam}_{args.direction}.json"
             if not path.exists():
-                r = success_by_level(load_policy(args.policy), eval_spec(args, fam, overrides))
+                from mjx_stairs.rl.policy import load_policy
+                from mjx_stairs.study.evaluate import success_by_level
+
+                policy = policy or load_policy(args.policy)
+                r = success_by_level(policy, eval_spec(args, fam, overrides))
                 atomic.write_text(path, json.dumps(r, indent=1) + "\n")
             r = json.loads(path.read_text())
             col.update({cell_name(fam, SCHEDULE, lv - 1, args.direction): s

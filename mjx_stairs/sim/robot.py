@@ -227,11 +227,11 @@ def build_mj_model(
         # The same spheres as ellipsoids with equal radii: MJX then collides them with the
         # terrain through mjx_stairs.sim.contact (registered for heightfield-ellipsoid pairs;
         # the heightfield's asset name picks the surface or the columns).
-        heads = (HEAD[0],) if config.head_collision else ()
-        for name in (*(n for group in SPHERE_GROUPS.values() for n in group), *heads):
-            geom = spec.geom(name)
-            geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
-            geom.size = [geom.size[0]] * 3
+        # Every sphere of the robot is a collision sphere (SPHERE_GROUPS, and the head).
+        for geom in spec.geoms:
+            if geom.type == mujoco.mjtGeom.mjGEOM_SPHERE:
+                geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
+                geom.size = [geom.size[0]] * 3
     elif config.terrain_contacts != "mjx":
         raise ValueError(
             "robot.terrain_contacts must be 'mjx', 'nearest' or 'columns', got "
