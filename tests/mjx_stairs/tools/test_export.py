@@ -109,6 +109,39 @@ def test_verify_reports_the_difference(policy, exported):
     assert export.verify(policy, exported[0], n=16) <= 1e-5
 
 
+def test_verify_compares_the_applied_action(policy, exported, tmp_path):
+    """verify judges the action a robot applies, clipped to the sidecar's action.clip, relative to
+    the largest raw action: with the clip at 1e-3 every action is clipped on both sides and they
+    agree exactly; a wrong graph (the policy's actions plus 0.01) is still caught inside the clip;
+    no sidecar is a clear error."""
+    onnx_path, side = exported
+    side_path = export.sidecar_path(onnx_path)
+    obs = (3.0 * np.random.default_rng(0).standard_normal((16, D))).astype(np.float32)
+    want = np.asarray(jax.jit(lambda o: policy_lib.policy_action(policy, o))(obs))
+    assert np.mean(np.abs(want) > side["action"]["clip"]) < 0.5  # the clip leaves most inside
+    tight = tmp_path / "tight.onnx"
+    tight.write_bytes(onnx_path.read_bytes())
+    export.sidecar_path(tight).write_text(json.dumps({**side, "action": {**side["action"],
+                                                                          "clip": 1e-3}}))
+    assert export.verify(policy, tight, n=16) == 0.0
+    model = onnx.load(str(onnx_path))  # the graph's output shifted by 0.01
+    out = model.graph.output[0].name
+    for n in model.graph.node:
+        n.output[:] = [o + "_raw" if o == out else o for o in n.output]
+    model.graph.initializer.append(onnx.numpy_helper.from_array(np.float32(0.01), "shift"))
+    model.graph.node.append(onnx.helper.make_node("Add", [out + "_raw", "shift"], [out]))
+    wrong = tmp_path / "wrong.onnx"
+    onnx.save(model, str(wrong))
+    export.sidecar_path(wrong).write_text(side_path.read_text())
+    scale = max(1.0, float(np.max(np.abs(want))))
+    assert 0.009 / scale < export.verify(policy, wrong, n=16) <= 0.0101 / scale
+    assert 0.01 / scale > 1e-4  # far above the CLI's 1e-5
+    bare = tmp_path / "bare.onnx"
+    bare.write_bytes(onnx_path.read_bytes())
+    with pytest.raises(export.ExportError, match="action.clip"):
+        export.verify(policy, bare, n=16)
+
+
 def test_graph_structure(exported):
     model = onnx.load(str(exported[0]))
     onnx.checker.check_model(model)
