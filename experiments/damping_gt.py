@@ -27,14 +27,20 @@ from pathlib import Path
 
 
 def overrides(config: str) -> tuple[str, ...]:
-    implicit = config.endswith("i")
+    """d<damping>[i][_l<ms>]: e.g. d2 (explicit), d2i (implicit), d2i_l20 (and a fixed 20 ms
+    action delay, robot.action_delay_s, in MJX and the ground truth alike)."""
+    base, _, lag = config.partition("_l")
+    implicit = base.endswith("i")
     try:
-        if not config.startswith("d"):
+        if not base.startswith("d") or (_ and not lag):
             raise ValueError
-        damping = float(config[1:-1] if implicit else config[1:])
+        damping = float(base[1:-1] if implicit else base[1:])
+        delay_ms = float(lag) if lag else 0.0
     except ValueError:
-        raise SystemExit(f"config {config!r}: expected d<damping>[i], e.g. d2 or d2i") from None
-    return (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
+        raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>], e.g. d2, d2i or "
+                         "d2i_l20") from None
+    out = (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
+    return out + ((f"robot.action_delay_s={delay_ms / 1000}",) if delay_ms else ())
 
 
 def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config: str,
@@ -89,7 +95,8 @@ def main() -> None:
         rows.append(f"| {config} | " + " | ".join(row) + " |")
     note = (f"\nsuccess % (falls %), {a.robots} robots, seed {a.seed}, {a.cell}, policy "
             f"{a.policy}; mjx: the evaluation physics; gt: CPU MuJoCo on box stairs. d<x>: joint "
-            f"damping x N m s/rad integrated explicitly, d<x>i: implicitly.\n")
+            f"damping x N m s/rad integrated explicitly, d<x>i: implicitly; _l<ms>: a fixed action "
+            f"delay.\n")
     (a.out / "table.md").write_text("\n".join(rows) + "\n" + note)
     print("\n".join(rows) + note)
 

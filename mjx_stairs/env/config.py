@@ -180,9 +180,12 @@ class EnvConfig:
 
     def __post_init__(self):
         lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
+        fixed = self.robot.action_delay_s
         _require("env", [
             ("randomization.action_delay_s", lag, lag <= step + 1e-9,
              f"at most one policy step ({step:g} s)"),
+            ("robot.action_delay_s", fixed, 0.0 <= fixed <= step + 1e-9,
+             f"in [0, one policy step ({step:g} s)]"),
             ("route.perturb_prob", self.route.perturb_prob,
              self.route.perturb_prob == 0 or self.goal_mode == "waypoint",
              "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)"),

@@ -17,10 +17,12 @@ from mjx_stairs.sim import robot as rb
 def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
     """This episode's draws from 6 keys (the nominal values with randomisation off): friction,
     added trunk mass, trunk CoM shift [3], motor strength [12], kp and kd scales; when
-    configured, the joints' passive damping and the action delay in physics steps."""
+    configured, the joints' passive damping and the action delay in physics steps (drawn, or
+    the robot's fixed `robot.action_delay_s`)."""
     r = config.randomization
+    fixed = int(round(config.robot.action_delay_s / config.robot.timestep))
     if not r.enabled:
-        return {
+        out = {
             "friction": jnp.asarray(config.robot.friction),
             "added_mass": jnp.zeros(()),
             "com_shift": jnp.zeros(3),
@@ -28,6 +30,9 @@ def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
             "kp_scale": jnp.ones(()),
             "kd_scale": jnp.ones(()),
         }
+        if fixed > 0:
+            out["delay_steps"] = jnp.asarray(fixed, jnp.int32)
+        return out
 
     def u(k, lohi, shape=()):
         return jax.random.uniform(k, shape, minval=lohi[0], maxval=lohi[1])
@@ -45,6 +50,8 @@ def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
     lo, hi = (int(round(s / config.robot.timestep)) for s in r.action_delay_s)
     if hi > 0:
         out["delay_steps"] = jax.random.randint(jax.random.fold_in(keys[0], 2), (), lo, hi + 1)
+    elif fixed > 0:
+        out["delay_steps"] = jnp.asarray(fixed, jnp.int32)
     return out
 
 

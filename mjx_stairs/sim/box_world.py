@@ -136,9 +136,11 @@ class Batch:
     def qvel(self) -> np.ndarray:
         return self.state[:, 1 + self.nq : 1 + self.nq + self.nv]
 
-    def step(self, q_target: np.ndarray, substeps: int, active: np.ndarray | None = None) -> None:
-        """Hold PD targets `q_target` [N, 12] for `substeps` physics steps; robots not `active`
-        stay as they are."""
+    def step(self, q_target: np.ndarray, substeps: int, active: np.ndarray | None = None,
+             previous: np.ndarray | None = None, delay: int = 0) -> None:
+        """Hold PD targets `q_target` [N, 12] for `substeps` physics steps, the first `delay` of
+        them still `previous` [N, 12] (an action delay, as the env's); robots not `active` stay
+        as they are."""
         on = np.ones(len(self.models), bool) if active is None else np.asarray(active, bool)
         target = np.asarray(q_target, np.float64)
         for key, group in self._groups.items():
@@ -146,6 +148,8 @@ class Batch:
             if rows.size == 0:
                 continue
             ctrl = np.repeat(target[rows, None, :], substeps, axis=1)
+            if delay > 0:
+                ctrl[:, :delay] = np.asarray(previous, np.float64)[rows, None, :]
             state, _ = self._runner.rollout(
                 self.models[rows[0]], self._datas[key], self.state[rows], ctrl, nstep=substeps
             )

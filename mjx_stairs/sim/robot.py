@@ -108,6 +108,12 @@ class RobotConfig:
     # contact (training's trunk-contact ending, the collision penalty). Off: the spheres of
     # go2.xml alone, as every policy up to 2026-11-26 trained.
     head_collision: bool = False
+    # The robot's fixed action delay (s): each PD target takes effect this long after the policy
+    # computed it, in whole physics steps (the previous target holds until then), as sim2sim's
+    # --latency-ms does; at most one policy step. For evaluating a policy with a delay
+    # (`--env robot.action_delay_s=0.02`): evaluation turns randomisation off, and with it
+    # env.randomization.action_delay_s, which draws the delay per robot instead where set.
+    action_delay_s: float = 0.0
 
     def __post_init__(self):
         if self.sunk_exit not in ("top", "nearest"):

@@ -119,7 +119,7 @@ def physics_settings(env: StairEnv) -> dict[str, Any]:
             "decimation": env.config.decimation,
             # the robot's own, from the policy's config (or an override): not the preset's
             "joint_damping": robot.joint_damping, "implicit_damping": robot.implicit_damping,
-            "head_collision": robot.head_collision}
+            "head_collision": robot.head_collision, "action_delay_s": robot.action_delay_s}
 
 
 def level_states(env: StairEnv, n_levels: int, spec: EvalSpec):

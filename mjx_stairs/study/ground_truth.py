@@ -149,12 +149,16 @@ def closed_loop(env: envlib.StairEnv, policy: Policy, info: dict, batch: bw.Batc
     control = _Controller(env, policy, info)
     c = env.config
     ep = _Episodes(batch.qpos.shape[0], max(1, int(round(c.success_hold_s / env.dt))))
+    # the robot's fixed action delay (robot.action_delay_s; evaluation draws none), in physics
+    # steps that still hold the previous target, as the env's actuation does
+    delay = min(c.decimation, int(round(c.robot.action_delay_s / c.robot.timestep)))
     for k in range(steps):
         active = ep.active
         if record is None and not active.any():
             break
+        before = rb.NOMINAL_JOINT_POS + c.robot.action_scale * last_action
         a, target = control(batch.qpos, batch.qvel, last_action)
-        batch.step(target, c.decimation, active)
+        batch.step(target, c.decimation, active, previous=before, delay=delay)
         last_action = np.where(active[:, None], a, last_action)
         close, fell = _endings(env, batch.qpos, batch.qvel, goal)
         ep.count = np.where(active, np.where(close, ep.count + 1, 0), ep.count)

@@ -108,7 +108,8 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         else [damping, damping],
         "joint_damping_integration": "implicit" if cfg.robot.implicit_damping else "explicit",
         "head_collision": cfg.robot.head_collision,
-        "action_delay_s": list(r.action_delay_s) if r.enabled else [0.0, 0.0],
+        "action_delay_s": list(r.action_delay_s) if r.enabled and r.action_delay_s[1] > 0
+        else [cfg.robot.action_delay_s] * 2,
         "pushes": None if not (r.enabled and r.push_interval_s > 0) else {
             "interval_s": r.push_interval_s, "velocity_m_s": r.push_velocity,
             "on_stairs_only": r.push_on_stairs},

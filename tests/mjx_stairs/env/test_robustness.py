@@ -134,6 +134,30 @@ def test_a_delay_of_a_whole_step_holds_the_previous_target(env, rollout, actuate
         assert np.abs(np.asarray(half.qpos) - np.asarray(other.qpos)).max() > 1e-5
 
 
+def test_a_fixed_delay_is_the_robots_own_in_evaluation_and_training():
+    """robot.action_delay_s: every robot's delay in whole physics steps where randomisation is
+    off (an evaluation with a delay: `--env robot.action_delay_s=0.02`), or on without a drawn
+    delay; a drawn range wins where configured; none at 0. Out of [0, one policy step]: a
+    one-line error naming the key."""
+    from mjx_stairs.env.config import ConfigError, evaluation_config
+
+    keys = jax.random.split(jax.random.PRNGKey(3), 6)
+    for delay, steps in ((0.02, 4), (0.01, 2), (0.0, None)):
+        for randomised in (False, True):
+            cfg = env_config_from(None, [f"robot.action_delay_s={delay}"])
+            cfg = cfg if randomised else evaluation_config(cfg)
+            got = dr.draw(keys, cfg).get("delay_steps")
+            assert (None if got is None else int(got)) == steps, (delay, randomised)
+    drawn = env_config_from(None, ["robot.action_delay_s=0.02",
+                                   "randomization.action_delay_s=[0.0, 0.005]"])
+    assert {int(dr.draw(jax.random.split(k, 6), drawn)["delay_steps"])
+            for k in jax.random.split(jax.random.PRNGKey(4), 32)} <= {0, 1}
+    for bad in ("0.03", "-0.01"):
+        with pytest.raises(ConfigError, match="robot.action_delay_s") as e:
+            env_config_from(None, [f"robot.action_delay_s={bad}"])
+        assert "\n" not in str(e.value)
+
+
 def test_damping_is_the_robots_own_and_slows_its_joints(env, rollout, actuate):
     data, info = _standing(env, rollout, qvel_joints=4.0)
     vj = env.robot.ids.qvel_joints

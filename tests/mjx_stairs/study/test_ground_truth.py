@@ -32,6 +32,26 @@ def test_go2_stands_on_box_stairs_with_its_weight_on_the_treads():
     assert bw.contact_summary(model, data)["vertical_force"] == pytest.approx(weight, rel=0.05)
 
 
+def test_a_delay_holds_the_previous_target_for_its_physics_steps():
+    """Batch.step with a delay (robot.action_delay_s in the ground truth): a delay of every
+    substep is the previous target held, none is the new one, two of four is neither."""
+    model = bw.build_model(np.zeros((0, 6)))
+    start = np.stack([rb.standing_qpos((0.0, 0.0), 0.36)] * 2)
+    before = np.tile(rb.NOMINAL_JOINT_POS + 0.3, (2, 1))
+    after = np.tile(rb.NOMINAL_JOINT_POS - 0.3, (2, 1))
+    runs = {}
+    for name, target, delay in (("late", after, 4), ("held", before, 0), ("now", after, 0),
+                                ("half", after, 2)):
+        robots = bw.Batch([model, model], start, nthread=1)
+        robots.step(target, 4, previous=before, delay=delay)
+        runs[name] = robots.qpos.copy()
+        robots.close()
+    np.testing.assert_array_equal(runs["late"], runs["held"])
+    assert np.abs(runs["late"] - runs["now"]).max() > 1e-3
+    for other in ("late", "now"):
+        assert np.abs(runs["half"] - runs[other]).max() > 1e-5
+
+
 def test_pd_actuators_are_the_env_pd_law():
     model = bw.build_model(np.zeros((0, 6)), rb.RobotConfig(kp=30.0, kd=0.8))
     data = mujoco.MjData(model)
