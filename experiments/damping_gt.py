@@ -26,6 +26,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 
+GRID = [f"d{d}i" + (f"_l{ms}" if ms else "") for d in ("0.1", "0.5", "1", "2")
+        for ms in (0, 5, 10, 15, 20)]  # docs/deploy.md's grid of damping and action delay
+
+
 def overrides(config: str) -> tuple[str, ...]:
     """d<damping>[i][_l<ms>]: e.g. d2 (explicit), d2i (implicit), d2i_l20 (and a fixed 20 ms
     action delay, robot.action_delay_s, in MJX and the ground truth alike)."""
@@ -73,7 +77,9 @@ def main() -> None:
     ap.add_argument("--cell", default="u_shaped:test:6", help="family:schedule:level (1-based)")
     ap.add_argument("--robots", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--configs", default="d0.1,d2,d2i")
+    ap.add_argument("--configs", default="d0.1,d2,d2i",
+                    help="comma-separated d<damping>[i][_l<ms>], or 'grid': damping 0.1 / 0.5 / "
+                         "1 / 2 (implicit) x delay 0 / 5 / 10 / 15 / 20 ms")
     ap.add_argument("--what", default="mjx,gt")
     a = ap.parse_args()
     family, schedule, level = a.cell.split(":")
@@ -81,7 +87,8 @@ def main() -> None:
     a.out.mkdir(parents=True, exist_ok=True)
     rows = ["| config | " + " | ".join(a.what.split(",")) + " |",
             "|---|" + "---|" * len(a.what.split(","))]
-    for config in a.configs.split(","):
+    configs = GRID if a.configs == "grid" else a.configs.split(",")
+    for config in configs:
         overrides(config)
         row = []
         for what in a.what.split(","):

@@ -28,7 +28,8 @@
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md), stage2-robot and
 # sim2sim-policy (issue 25: stage 2 for a real Go2's joints, a policy's sim-to-sim table with MJX
-# columns of the same starts). Each training step stops and
+# columns of the same starts), stage2-robot-corner and delay-grid (issue 25: the damping x delay
+# corner, a policy on the whole grid in MuJoCo itself). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -408,6 +409,18 @@ run_step() {
     # issue 25: stage 2 fine-tuned for a real Go2's joints (experiments/stage2_u_robot.toml:
     # damping 0.1-2 N m s/rad integrated implicitly, 0-20 ms delay; from stage2_u's policy)
     stage2-robot) train stage2_u_robot experiments/stage2_u_robot.toml ;;
+    # issue 25: stage2_u_robot fine-tuned on the damping x delay corner it fails
+    # (stage2_u_robot_corner.toml); then delay-grid: a policy (GRID_POLICY, default
+    # stage2_u_robot_corner: trained in this command, carried, or committed) on the grid of damping
+    # 0.1-2 x delay 0-20 ms in MuJoCo itself (U L5 up, 200 robots per cell), on the host's CPUs
+    # in the background, into $OUT/delay_grid/<policy>/
+    stage2-robot-corner) train stage2_u_robot_corner experiments/stage2_u_robot_corner.toml ;;
+    delay-grid)
+      name=${GRID_POLICY:-stage2_u_robot_corner}
+      p=/tmp/policies/$name.npz; [ -f "$p" ] || p=.carry/$name/policy.npz
+      [ -f "$p" ] || p=experiments/results/$name/policy.npz
+      background "delay_grid/$name" python3 experiments/damping_gt.py "$BG/delay_grid/$name" \
+        --policy "$p" --cell u_shaped:test:5 --robots 200 --what gt --configs grid ;;
     # issue 25: a policy's sim-to-sim table (S2S_POLICY: a run trained in this command or carried
     # in .carry/, default stage2_u_robot) on the paper's test levels (S2S_CELLS, default u_shaped;
     # S2S_DIRECTION up|down), S2S_EPISODES (200) per level: its two MJX columns of the very starts
