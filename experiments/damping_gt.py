@@ -32,10 +32,10 @@ GRID = [f"d{d}i" + (f"_l{ms}" if ms else "") for d in ("0.1", "0.5", "1", "2")
 def overrides(config: str) -> tuple[str, ...]:
     """d<damping>[i][_l<ms>]: e.g. d2 (explicit), d2i (implicit), d2i_l20 (and a fixed 20 ms
     action delay, robot.action_delay_s, in MJX and the ground truth alike)."""
-    base, _, lag = config.partition("_l")
+    base, sep, lag = config.partition("_l")
     implicit = base.endswith("i")
     try:
-        if not base.startswith("d") or (_ and not lag):
+        if not base.startswith("d") or (sep and not lag):
             raise ValueError
         damping = float(base[1:-1] if implicit else base[1:])
         delay_ms = float(lag) if lag else 0.0

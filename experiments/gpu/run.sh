@@ -95,6 +95,12 @@ bench() {  # bench OUT_FILE CONFIG [overrides and options...]
 # Background jobs on the host's CPUs (the ground truth, sim-to-sim) write under $BG, outside
 # $OUT, and are copied to $OUT by collect.
 BG=/tmp/bg.$$
+
+trained_policy() {  # trained_policy NAME: the policy of run NAME trained in this command, else
+  # the one carried in .carry/NAME/
+  local p=/tmp/policies/$1.npz; [ -f "$p" ] || p=.carry/$1/policy.npz; echo "$p"
+}
+
 background() {  # background NAME CMD...: CMD with JAX_PLATFORMS=cpu, in the background, stopped
   # 20 s before the deadline; it writes $BG/NAME/, its log goes to $BG/NAME.log
   local name=$1; shift
@@ -231,7 +237,7 @@ run_step() {
     stage1-lean) train stage1_lean experiments/stage1_lean.toml ;;
     stage2-lean) train stage2_u_lean experiments/stage2_u_lean.toml ;;
     eval-lean)
-      p=/tmp/policies/stage2_u_lean.npz; [ -f "$p" ] || p=.carry/stage2_u_lean/policy.npz
+      p=$(trained_policy stage2_u_lean)
       python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
         --env $REFERENCE \
         --out "$OUT/stage2_u_lean/eval_reference_physics" 2>&1 | grep -v warp
@@ -249,7 +255,7 @@ run_step() {
       models=/tmp/transfer_models.toml; echo "[models]" > $models
       echo "u_shaped = \"experiments/results/stage2_u_lean/policy.npz\"" >> $models
       for fam in straight l_shaped spiral; do
-        p=/tmp/policies/$fam.npz; [ -f "$p" ] || p=.carry/$fam/policy.npz
+        p=$(trained_policy "$fam")
         echo "$fam = \"$p\"" >> $models
       done
       python3 -m mjx_stairs transfer-matrix --config $models --robots 1000 \
@@ -262,7 +268,7 @@ run_step() {
     # the generalist (trained in this command, else carried) on the paper's test levels of the
     # four families, 1000 robots per level, up then down (GEN_DIRECTIONS), each cut at the deadline
     eval-generalist)
-      p=/tmp/policies/generalist.npz; [ -f "$p" ] || p=.carry/generalist/policy.npz
+      p=$(trained_policy generalist)
       for dir in ${GEN_DIRECTIONS:-up down}; do
         [ "$(left)" -lt 90 ] && { echo "no time left for $dir"; break; }
         timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
@@ -417,8 +423,7 @@ run_step() {
     stage2-robot-corner) train stage2_u_robot_corner experiments/stage2_u_robot_corner.toml ;;
     delay-grid)
       name=${GRID_POLICY:-stage2_u_robot_corner}
-      p=/tmp/policies/$name.npz; [ -f "$p" ] || p=.carry/$name/policy.npz
-      [ -f "$p" ] || p=experiments/results/$name/policy.npz
+      p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
       background "delay_grid/$name" python3 experiments/damping_gt.py "$BG/delay_grid/$name" \
         --policy "$p" --cell u_shaped:test:5 --robots 200 --what gt --configs grid ;;
     # issue 25: a policy's sim-to-sim table (S2S_POLICY: a run trained in this command or carried
@@ -429,7 +434,7 @@ run_step() {
     # $OUT/sim2sim/<policy>_<direction>/
     sim2sim-policy)
       name=${S2S_POLICY:-stage2_u_robot}; dir=${S2S_DIRECTION:-up}
-      p=/tmp/policies/$name.npz; [ -f "$p" ] || p=.carry/$name/policy.npz
+      p=$(trained_policy "$name")
       d="$BG/sim2sim/${name}_$dir"; mkdir -p "$d"
       s2s=(--policy "$p" --out "$d" --cells ${S2S_CELLS:-u_shaped} --direction "$dir"
            --episodes "${S2S_EPISODES:-200}" --mjx

@@ -20,7 +20,6 @@ def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
     configured, the joints' passive damping and the action delay in physics steps (drawn, or
     the robot's fixed `robot.action_delay_s`)."""
     r = config.randomization
-    fixed = int(round(config.robot.action_delay_s / config.robot.timestep))
     if not r.enabled:
         out = {
             "friction": jnp.asarray(config.robot.friction),
@@ -30,28 +29,26 @@ def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
             "kp_scale": jnp.ones(()),
             "kd_scale": jnp.ones(()),
         }
-        if fixed > 0:
-            out["delay_steps"] = jnp.asarray(fixed, jnp.int32)
-        return out
+    else:
+        def u(k, lohi, shape=()):
+            return jax.random.uniform(k, shape, minval=lohi[0], maxval=lohi[1])
 
-    def u(k, lohi, shape=()):
-        return jax.random.uniform(k, shape, minval=lohi[0], maxval=lohi[1])
-
-    out = {
-        "friction": u(keys[0], r.friction),
-        "added_mass": u(keys[1], r.added_mass),
-        "com_shift": u(keys[2], (-r.com_shift, r.com_shift), (3,)),
-        "motor_strength": u(keys[3], r.motor_strength, (12,)),
-        "kp_scale": u(keys[4], r.kp_scale),
-        "kd_scale": u(keys[5], r.kd_scale),
-    }
-    if r.joint_damping:
-        out["joint_damping"] = u(jax.random.fold_in(keys[0], 1), r.joint_damping)
-    lo, hi = (int(round(s / config.robot.timestep)) for s in r.action_delay_s)
-    if hi > 0:
-        out["delay_steps"] = jax.random.randint(jax.random.fold_in(keys[0], 2), (), lo, hi + 1)
-    elif fixed > 0:
-        out["delay_steps"] = jnp.asarray(fixed, jnp.int32)
+        out = {
+            "friction": u(keys[0], r.friction),
+            "added_mass": u(keys[1], r.added_mass),
+            "com_shift": u(keys[2], (-r.com_shift, r.com_shift), (3,)),
+            "motor_strength": u(keys[3], r.motor_strength, (12,)),
+            "kp_scale": u(keys[4], r.kp_scale),
+            "kd_scale": u(keys[5], r.kd_scale),
+        }
+        if r.joint_damping:
+            out["joint_damping"] = u(jax.random.fold_in(keys[0], 1), r.joint_damping)
+        lo, hi = (int(round(s / config.robot.timestep)) for s in r.action_delay_s)
+        if hi > 0:
+            out["delay_steps"] = jax.random.randint(jax.random.fold_in(keys[0], 2), (), lo,
+                                                    hi + 1)
+    if "delay_steps" not in out and config.robot.action_delay_steps > 0:
+        out["delay_steps"] = jnp.asarray(config.robot.action_delay_steps, jnp.int32)
     return out
 
 

@@ -115,6 +115,11 @@ class RobotConfig:
     # env.randomization.action_delay_s, which draws the delay per robot instead where set.
     action_delay_s: float = 0.0
 
+    @property
+    def action_delay_steps(self) -> int:
+        """`action_delay_s` in whole physics steps."""
+        return int(round(self.action_delay_s / self.timestep))
+
     def __post_init__(self):
         if self.sunk_exit not in ("top", "nearest"):
             raise ConfigError("config key 'env.robot.sunk_exit': must be 'top' or 'nearest', got "

@@ -96,7 +96,11 @@ class _Controller:
                             self._info)
         c = self._c
         a = np.clip(np.asarray(self._act(obs)), -c.action_clip, c.action_clip)
-        return a, rb.NOMINAL_JOINT_POS + c.robot.action_scale * a
+        return a, self.target(a)
+
+    def target(self, action: np.ndarray) -> np.ndarray:
+        """The PD target [B, 12] of a (clipped) action."""
+        return rb.NOMINAL_JOINT_POS + self._c.robot.action_scale * action
 
 
 @dataclasses.dataclass
@@ -149,14 +153,14 @@ def closed_loop(env: envlib.StairEnv, policy: Policy, info: dict, batch: bw.Batc
     control = _Controller(env, policy, info)
     c = env.config
     ep = _Episodes(batch.qpos.shape[0], max(1, int(round(c.success_hold_s / env.dt))))
-    # the robot's fixed action delay (robot.action_delay_s; evaluation draws none), in physics
+    # the robot's fixed action delay (robot.action_delay_s; evaluation draws none): physics
     # steps that still hold the previous target, as the env's actuation does
-    delay = min(c.decimation, int(round(c.robot.action_delay_s / c.robot.timestep)))
+    delay = c.robot.action_delay_steps
     for k in range(steps):
         active = ep.active
         if record is None and not active.any():
             break
-        before = rb.NOMINAL_JOINT_POS + c.robot.action_scale * last_action
+        before = control.target(last_action) if delay else None
         a, target = control(batch.qpos, batch.qvel, last_action)
         batch.step(target, c.decimation, active, previous=before, delay=delay)
         last_action = np.where(active[:, None], a, last_action)
