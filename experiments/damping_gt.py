@@ -10,10 +10,10 @@ do). For each config: `mjx` evaluates the policy in MJX, the evaluation physics
 (`study.evaluate.success_by_cell`), `gt` in the CPU MuJoCo ground truth (box stairs, default
 solver: `study.ground_truth.success_in_ground_truth`), both from the same starts (seed). One JSON
 per (what, config) under OUT, skipped when there; each keeps every robot's outcome, so two
-configs compare episode by episode. Then OUT/table.md. Every evaluation runs in a process of its
-own (one compiled program at a time; the committed tables ran with XLA_FLAGS="--xla_cpu_use_
-fusion_emitters=false --xla_backend_optimization_level=1", as make's CPU targets, but for
-damping/generalist_u_test_6/mjx_d2.json, at XLA's defaults).
+configs compare episode by episode. Then OUT/table.md. Every evaluation runs in a process of
+its own, --jobs of them at once (one compiled program per process; the committed tables ran
+with XLA_FLAGS="--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1", as
+make's CPU targets, but for damping/generalist_u_test_6/mjx_d2.json, at XLA's defaults).
 """
 
 from __future__ import annotations
@@ -80,6 +80,8 @@ def main() -> None:
                     help="comma-separated d<damping>[i][_l<ms>], or 'grid': damping 0.1 / 0.5 / "
                          "1 / 2 (implicit) x delay 0 / 5 / 10 / 15 / 20 ms")
     ap.add_argument("--what", default="mjx,gt")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="configs run at once, each in its own process (a host's spare cores)")
     a = ap.parse_args()
     family, schedule, level = a.cell.split(":")
     cell = (family, schedule, int(level) - 1)
@@ -88,17 +90,23 @@ def main() -> None:
             "|---|" + "---|" * len(a.what.split(","))]
     configs = GRID if a.configs == "grid" else a.configs.split(",")
     for config in configs:
-        overrides(config)
-        row = []
-        for what in a.what.split(","):
-            with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-                r = pool.submit(run, a.out, a.policy, cell, a.robots, a.seed, config,
-                                what).result()
-            s, f = 100 * r["success"][0], 100 * r["fell"][0]
-            print(f"{what} {config}: {s:.1f} % success, {f:.1f} % falls "
-                  f"({r['wall_s_total']:.0f} s)", flush=True)
-            row.append(f"{s:.1f} ({f:.1f})")
-        rows.append(f"| {config} | " + " | ".join(row) + " |")
+        overrides(config)  # a bad name fails here, before anything runs
+    whats = a.what.split(",")
+    # a fresh process for each (config, what), --jobs at once (a JAX process keeps what it
+    # compiled); results are printed in the table's order
+    with ProcessPoolExecutor(a.jobs, mp_context=multiprocessing.get_context("spawn"),
+                             max_tasks_per_child=1) as pool:
+        futures = {(c, w): pool.submit(run, a.out, a.policy, cell, a.robots, a.seed, c, w)
+                   for c in configs for w in whats}
+        for config in configs:
+            row = []
+            for what in whats:
+                r = futures[config, what].result()
+                s, f = 100 * r["success"][0], 100 * r["fell"][0]
+                print(f"{what} {config}: {s:.1f} % success, {f:.1f} % falls "
+                      f"({r['wall_s_total']:.0f} s)", flush=True)
+                row.append(f"{s:.1f} ({f:.1f})")
+            rows.append(f"| {config} | " + " | ".join(row) + " |")
     note = (f"\nsuccess % (falls %), {a.robots} robots, seed {a.seed}, {a.cell}, policy "
             f"{a.policy}; mjx: the evaluation physics; gt: CPU MuJoCo on box stairs. d<x>: joint "
             f"damping x N m s/rad integrated explicitly, d<x>i: implicitly; _l<ms>: a fixed action "

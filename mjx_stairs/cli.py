@@ -128,7 +128,14 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     if args.config is None:  # the whole experiment: train what is missing, then the matrix
         transfer.run_pipeline(spec, force=args.force)
         return 0
-    result = transfer.matrix(transfer.load_models(args.config), spec, args.out)
+    result = transfer.matrix(transfer.load_models(args.config), spec, args.out,
+                             rows=args.rows, columns=args.columns)
+    if "cells" in result:  # a part of the matrix: its cells only
+        for src, row in result["cells"].items():
+            for dst, rec in row.items():
+                print(f"{src} on {dst}: " + " / ".join(f"{100 * s:.1f}" for s in rec["success"]),
+                      flush=True)
+        return 0
     print(transfer.markdown(result), flush=True)
     return 0
 
@@ -313,6 +320,11 @@ def _add_studies(sub) -> None:
     m.add_argument("--force", action="store_true", help="retrain models already published")
     add_spec_flags(m, EvalSpec, exclude=("family", "schedule"), levels=(2, 3))
     m.add_argument("--out", default="experiments/results/transfer")
+    m.add_argument("--rows", nargs="+", default=(), metavar="MODEL",
+                   help="only these models' cells (written to OUT/cells/; a later run without "
+                   "--rows/--columns assembles the matrix from them)")
+    m.add_argument("--columns", nargs="+", default=(), metavar="FAMILY",
+                   help="only the cells on these families")
     m.set_defaults(fn=cmd_transfer)
 
 

@@ -45,6 +45,8 @@ POLICIES = {  # the committed policies the README cites
     "spiral_lean": RESULTS / "transfer_lean/spiral/policy.npz",
     "generalist": RESULTS / "generalist/policy.npz",
     "generalist_line": RESULTS / "generalist_line/policy.npz",  # + 480 it with env.low_line_m
+    "generalist_robot": RESULTS / "generalist_robot/policy.npz",  # implicit damping, head
+    "stage2_u_robot": RESULTS / "stage2_u_robot/policy.npz",
 }
 MESH_POLICIES = ("stage2_u", "stage2_u_lean")  # the default of --mesh-policies
 CODE_EXPORTS = ("code_commercial_u_left_up", "code_commercial_u_left_down")
@@ -243,7 +245,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--steps", default="suite,mesh,alone,table")
-    ap.add_argument("--policies", default=",".join(POLICIES), help="for the suite step")
+    ap.add_argument("--policies", default=",".join(POLICIES),
+                    help="for the suite step: names of committed policies, or NAME=FILE for "
+                    "another (e.g. one trained in the same GPU command)")
     ap.add_argument("--mesh-policies", default=",".join(MESH_POLICIES), help="for the mesh step")
     ap.add_argument("--robots", type=int, default=1000, help="robots per case")
     ap.add_argument("--episode-s", type=float, default=30.0)
@@ -257,11 +261,17 @@ def main() -> None:
     spec = EvalSpec(robots_per_level=a.robots, episode_length_s=a.episode_s, seed=a.seed,
                     resolution=a.resolution, env_overrides=tuple(a.env))
     a.out.mkdir(parents=True, exist_ok=True)
-    names = [n for n in a.policies.split(",") if n]
-    mesh_names = tuple(n for n in a.mesh_policies.split(",") if n)
+    names, mesh_names = [], []
+    for arg, into in ((a.policies, names), (a.mesh_policies, mesh_names)):
+        for n in filter(None, arg.split(",")):
+            name, sep, file = n.partition("=")
+            if sep:
+                POLICIES[name] = Path(file)
+            into.append(name)
+    mesh_names = tuple(mesh_names)
     missing = [n for n in (*names, *mesh_names) if n not in POLICIES or not POLICIES[n].exists()]
     if missing:
-        raise SystemExit(f"code_suite: no committed policy for {', '.join(missing)}")
+        raise SystemExit(f"code_suite: no policy file for {', '.join(missing)}")
     steps = a.steps.split(",")
     t0 = time.time()
     for step, fn in (("suite", lambda: run_suite(a.out, names, spec)),

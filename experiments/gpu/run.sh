@@ -21,7 +21,7 @@
 # matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper,
 # eval-paper-committed
 # (issue 21: stage 2 as the paper has it, SEED=N), straight-paper, l-shaped-paper, spiral-paper,
-# transfer-paper (RQ2 in the paper's setting), bench-options (issue 22: the speed of
+# transfer-paper (RQ2 in the paper's setting), eval-names (named policies at 1000 robots), bench-options (issue 22: the speed of
 # physics between columns and the evaluation physics), stage2-physics, eval-physics (issue 22:
 # stage 2 trained in one physics option, judged in the evaluation physics), warp (MuJoCo Warp's
 # speed and success), gpus, pack; and on the host's CPUs beside the
@@ -186,6 +186,28 @@ two_processes() {  # the same short stage-2 run: one process on GPUs 0,1, then t
   python3 experiments/compare_runs.py /tmp/runs/one /tmp/runs/two --out "$d/compare.json"
 }
 
+paper_models() {  # paper_models FILE: the [models] of the paper-setting transfer matrix, each
+  # committed, else trained in this command, else carried
+  local fam n p; echo "[models]" > "$1"
+  for fam in u_shaped straight l_shaped spiral; do
+    n=${fam}_paper; [ $fam = u_shaped ] && n=stage2_u_paper
+    p=experiments/results/$n/policy.npz; [ -f "$p" ] || p=$(trained_policy "$n")
+    echo "$fam = \"$p\"" >> "$1"
+  done
+}
+
+# an evaluation of named policies (EVAL_NAMES a+b: trained here, carried, else committed) on
+# EVAL_FAMILIES (a+b, default u_shaped), 1000 robots, the evaluation physics, into $OUT/eval/<name>/
+eval_names() {
+  local name p
+  for name in ${EVAL_NAMES//+/ }; do
+    p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
+    [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
+    timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
+      --family ${EVAL_FAMILIES//+/ } --out "$OUT/eval/$name" 2>&1 | grep -v warp
+  done
+}
+
 GPU_JOBS=()
 gpu_group() {  # gpuN:TOKEN,...: on GPU N alone (CUDA_VISIBLE_DEVICES=N), in the background beside
   # the other groups, each TOKEN in turn: KEY=VALUE sets a variable for the group's later steps
@@ -265,10 +287,11 @@ run_step() {
     # physics); resumes from .carry/generalist/. bench-generalist: its physics-only rate at 4096
     # robots on its own atlas, for the training rate the run logs
     generalist) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist experiments/generalist.toml ;;
-    # the generalist (trained in this command, else carried) on the paper's test levels of the
-    # four families, 1000 robots per level, up then down (GEN_DIRECTIONS), each cut at the deadline
+    # the generalist (GEN_POLICY, else the one trained in this command, else carried) on the
+    # paper's test levels of the four families, 1000 robots per level, up then down
+    # (GEN_DIRECTIONS), each cut at the deadline
     eval-generalist)
-      p=$(trained_policy generalist)
+      p=${GEN_POLICY:-$(trained_policy generalist)}
       for dir in ${GEN_DIRECTIONS:-up down}; do
         [ "$(left)" -lt 90 ] && { echo "no time left for $dir"; break; }
         timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
@@ -337,6 +360,7 @@ run_step() {
       done ;;
     # committed policies (EVAL_RUNS: names under experiments/results/) in the reference physics,
     # loaded as a robot runs them (float32 encoder), into $OUT/eval/<name>
+    eval-names) EVAL_FAMILIES=${EVAL_FAMILIES:-u_shaped} eval_names ;;
     eval-committed)
       for name in ${EVAL_RUNS:-}; do
         python3 -m mjx_stairs eval --checkpoint "experiments/results/$name/policy.npz" \
@@ -346,10 +370,15 @@ run_step() {
     # eval --mesh against eval --family on U-shaped test level 3; CODE_SUITE_ARGS (e.g. --steps
     # suite --policies stage1,stage2_u) picks a part; finished files are kept when re-run. The
     # published table (docs/results.md section 7): CODE_SUITE_ARGS="--steps suite --policies
-    # stage2_u", then "--steps suite,mesh --policies stage2_u_lean,stage1"
+    # stage2_u", then "--steps suite,mesh --policies stage2_u_lean,stage1"; CODE_MESH (a+b):
+    # the mesh step for those policies (NAME=FILE as CODE_POLICIES)
     code-suite)
-      python3 experiments/gpu/code_suite.py "$OUT/code_suite" ${CODE_SUITE_ARGS:-} 2>&1 \
-        | grep -v warp ;;
+      args=(${CODE_SUITE_ARGS:-})  # CODE_POLICIES (a+b, NAME=FILE for an uncommitted one; a
+      # gpuN: token cannot hold a comma): the suite step for those policies only
+      [ -n "${CODE_POLICIES:-}" ] && args+=(--steps suite --policies "${CODE_POLICIES//+/,}")
+      [ -n "${CODE_MESH:-}" ] && args+=(--steps mesh --mesh-policies "${CODE_MESH//+/,}")
+      timeout $(( $(left) - 15 )) python3 experiments/gpu/code_suite.py "$OUT/code_suite" \
+        "${args[@]}" 2>&1 | grep -v warp ;;
     # issue 19 (docs/results.md section 5b): the published policies in MJX physics options on the
     # 36 fidelity cells, into the published folders under $OUT/ground_truth/. FIDELITY_OPTIONS
     # (default evaluation: mjx_eval/, section 1's evaluation-physics row and the fidelity table's
@@ -425,7 +454,8 @@ run_step() {
       name=${GRID_POLICY:-stage2_u_robot_corner}
       p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
       background "delay_grid/$name" python3 experiments/damping_gt.py "$BG/delay_grid/$name" \
-        --policy "$p" --cell u_shaped:test:5 --robots 200 --what gt --configs grid ;;
+        --policy "$p" --cell u_shaped:test:5 --robots 200 --what gt --configs grid \
+        --jobs "${GRID_JOBS:-10}" ;;
     # issue 25: a policy's sim-to-sim table (S2S_POLICY: a run trained in this command or carried
     # in .carry/, default stage2_u_robot) on the paper's test levels (S2S_CELLS, default u_shaped;
     # S2S_DIRECTION up|down), S2S_EPISODES (200) per level: its two MJX columns of the very starts
@@ -471,21 +501,30 @@ run_step() {
         "train.experiment=${cfg}_s${SEED:-0}" ;;
     # RQ2 in the paper's setting: the family models (experiments/<family>_paper.toml, resumed
     # from .carry/<family>_paper/), then transfer-paper: transfer_matrix_paper.toml's matrix
-    # (committed models, else the ones trained here or carried), 1000 robots per cell
+    # (committed models, else the ones trained here or carried), 1000 robots per cell, kept
+    # cells carried in .carry/transfer_paper/cells/; TP_ROWS / TP_COLUMNS: a part of it, e.g.
+    # a row split over the GPUs (gpuN:TP_WAIT=spiral_paper,TP_ROWS=spiral,TP_COLUMNS=straight,
+    # transfer-paper: after the spiral model trained on another GPU), then transfer-paper alone
+    # assembles the matrix
     straight-paper|l-shaped-paper|spiral-paper)
       fam=${step%-paper}; fam=${fam//-/_}
       train "${fam}_paper" "experiments/${fam}_paper.toml" ;;
     transfer-paper)
-      models=/tmp/transfer_paper.toml; echo "[models]" > $models
-      for fam in u_shaped straight l_shaped spiral; do
-        n=${fam}_paper; [ $fam = u_shaped ] && n=stage2_u_paper
-        p=experiments/results/$n/policy.npz; [ -f "$p" ] || p=/tmp/policies/$n.npz
-        [ -f "$p" ] || p=.carry/$n/policy.npz
-        echo "$fam = \"$p\"" >> $models
-      done
-      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
-      timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix --config $models \
-        --robots 1000 --out "$OUT/transfer_paper" 2>&1 | grep -v warp ;;
+      if [ -n "${TP_WAIT:-}" ]; then  # a run trained on another GPU of this command
+        while [ ! -f "/tmp/policies/$TP_WAIT.npz" ] && [ "$(left)" -gt 60 ]; do sleep 5; done
+        sleep 2  # train copies the file there
+      fi
+      models=/tmp/transfer_paper.$BASHPID.toml; paper_models "$models"  # one per GPU group
+      part=()  # TP_ROWS / TP_COLUMNS (a+b): only those cells (one GPU's part of the matrix)
+      [ -n "${TP_ROWS:-}" ] && part+=(--rows ${TP_ROWS//+/ })
+      [ -n "${TP_COLUMNS:-}" ] && part+=(--columns ${TP_COLUMNS//+/ })
+      if [ ${#part[@]} -eq 0 ] && [ -d .carry/transfer_paper/cells ]; then  # an earlier command's
+        mkdir -p "$OUT/transfer_paper" && cp -rn .carry/transfer_paper/cells "$OUT/transfer_paper/"
+      fi
+      [ "$(left)" -lt 60 ] && { echo "no time left for $step"; return; }
+      timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix \
+        --config "$models" --robots 1000 --out "$OUT/transfer_paper" "${part[@]}" \
+        2>&1 | grep -v warp ;;
     # eval-paper-committed: the committed RQ1 policies (experiments/results/stage2_u_paper*/) in
     # today's evaluation physics at the authors' 0.8 m (PAPER_RADII), into $OUT/paper_eval/<name>/
     eval-paper-committed)

@@ -10,6 +10,7 @@ import dataclasses
 import hashlib
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -68,19 +69,32 @@ def _finished_cell(path: Path, want: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def matrix(
-    models: dict[str, str], spec: evaluate.EvalSpec, out_dir: str | os.PathLike | None = None
+    models: dict[str, str], spec: evaluate.EvalSpec, out_dir: str | os.PathLike | None = None,
+    rows: Sequence[str] = (), columns: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Success of each model (rows) on each family (columns) at spec.levels; transferability.
     With `out_dir`, every (model, family) cell is written to out_dir/cells/ when it finishes and
     a cell finished there before (same policy file, levels, robots, physics, overrides) is
-    reused: a matrix cut short resumes where it stopped."""
+    reused: a matrix cut short resumes where it stopped. `rows` / `columns` (model and family
+    names) restrict the run to those cells, e.g. one cell per GPU of a host: the part's cells
+    are returned ({"cells": {model: {family: record}}}) and written, the matrix is not; a run
+    over the same folder without them assembles it from the kept cells."""
     families = list(models)
+    unknown = sorted((set(rows) | set(columns)) - set(families))
+    if unknown:
+        raise ConfigError(f"transfer matrix: {', '.join(unknown)} not among its models "
+                          f"({', '.join(families)})")
+    partial = bool(rows or columns)
     success: dict[str, dict[str, dict[str, Any]]] = {}
     cells = Path(out_dir) / "cells" if out_dir is not None else None
     for src, path in models.items():
+        if rows and src not in rows:
+            continue
         policy, digest = None, _sha256(path)
         success[src] = {}
         for dst in families:
+            if columns and dst not in columns:
+                continue
             dst_spec = dataclasses.replace(spec, family=dst)
             want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
                     "robots_per_level": spec.robots_per_level,
@@ -100,6 +114,8 @@ def matrix(
                     cell.parent.mkdir(parents=True, exist_ok=True)
                     atomic.write_text(cell, json.dumps(rec, indent=2))
             success[src][dst] = rec
+    if partial:
+        return {"cells": success}
     mean = {s: {d: float(np.mean(success[s][d]["success"])) for d in families} for s in families}
     transfer = transferability(mean)
     out = {

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from mjx_stairs import cli
+from mjx_stairs.config import ConfigError
 from mjx_stairs.env import observation
 from mjx_stairs.rl.policy import load_policy
 from mjx_stairs.study import bench, critic_map, evaluate, exp1, experiment, plots, transfer
@@ -128,6 +129,21 @@ def test_transfer_matrix_and_transferability(trained, tmp_path, monkeypatch):
     monkeypatch.setattr(evaluate, "success_by_level", no_evaluation)
     again = transfer.matrix({"u_shaped": path}, spec, tmp_path)
     assert again["success"] == result["success"]
+    # a part of the matrix (one GPU's cells): only the cells asked for, no matrix written over
+    # the whole one; here from kept cells, and a straight column would be evaluated (and raise)
+    cells = tmp_path / "cells"
+    (cells / "straight__on__u_shaped.json").write_text(
+        (cells / "u_shaped__on__u_shaped.json").read_text())
+    before = (tmp_path / "transfer.json").read_text()
+    part = transfer.matrix({"u_shaped": path, "straight": path}, spec, tmp_path,
+                           columns=["u_shaped"])
+    assert part == {"cells": {m: {"u_shaped": cell} for m in ("u_shaped", "straight")}}
+    assert transfer.matrix({"u_shaped": path, "straight": path}, spec, tmp_path,
+                           rows=["straight"], columns=["u_shaped"]) == {
+        "cells": {"straight": {"u_shaped": cell}}}
+    assert (tmp_path / "transfer.json").read_text() == before
+    with pytest.raises(ConfigError, match="spiral not among its models"):
+        transfer.matrix({"u_shaped": path}, spec, tmp_path, rows=["spiral"])
     # ... but not a cell of another policy file, other levels or other overrides
     saved = tmp_path / "cells" / "u_shaped__on__u_shaped.json"
     want = {k: cell[k] for k in ("family", "levels", "checkpoint", "checkpoint_sha256")}
