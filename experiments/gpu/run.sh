@@ -197,14 +197,16 @@ paper_models() {  # paper_models FILE: the [models] of the paper-setting transfe
 }
 
 # an evaluation of named policies (EVAL_NAMES a+b: trained here, carried, else committed) on
-# EVAL_FAMILIES (a+b, default u_shaped), 1000 robots, the evaluation physics, into $OUT/eval/<name>/
+# EVAL_FAMILIES (a+b, default u_shaped), EVAL_DIRECTION (up), 1000 robots, the evaluation
+# physics, into $OUT/eval/<name>[_<direction>]/
 eval_names() {
   local name p
   for name in ${EVAL_NAMES//+/ }; do
     p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
     [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
     timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
-      --family ${EVAL_FAMILIES//+/ } --out "$OUT/eval/$name" 2>&1 | grep -v warp
+      --family ${EVAL_FAMILIES//+/ } --direction "${EVAL_DIRECTION:-up}" \
+      --out "$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}" 2>&1 | grep -v warp
   done
 }
 
