@@ -79,7 +79,7 @@ def facts(spec, t0: float, **extra) -> dict:
 def run_suite(out: Path, names: list[str], spec) -> None:
     """Policies that share an evaluation env share one compiled program (cases.by_env)."""
     from mjx_stairs.rl.policy import load_policy
-    from mjx_stairs.study import cases
+    from mjx_stairs.study import cases, evaluate
 
     code = cases.suite_cases("code", spec.resolution)
     todo = {n: load_policy(POLICIES[n]) for n in names if not (out / f"code_{n}.json").exists()}
@@ -87,8 +87,10 @@ def run_suite(out: Path, names: list[str], spec) -> None:
         t0 = time.time()
         for name, recs in cases.success_by_case(group, code, spec).items():
             print(f"\n{name}, code suite\n" + cases.case_table(recs), flush=True)
-            write(out / f"code_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
-                                                   suite="code", results=recs))
+            env_config = evaluate.env_config_of(todo[name], evaluate.physics_overrides(spec))
+            write(out / f"code_{name}.json", facts(
+                spec, t0, policy=str(POLICIES[name]), suite="code",
+                physics_settings=evaluate.physics_settings(env_config), results=recs))
 
 
 def run_alone(out: Path, spec) -> None:

@@ -110,13 +110,14 @@ def _check_finished(finished: np.ndarray) -> None:
         raise RuntimeError("evaluation ended with robots still in their first episode")
 
 
-def physics_settings(env: StairEnv) -> dict[str, Any]:
+def physics_settings(env: StairEnv | EnvConfig) -> dict[str, Any]:
     """The robot physics an evaluation ran in (the fields the evaluation preset sets), resolved
     from its preset: a record says what its numbers mean even after a preset's name is given to
-    other settings."""
-    robot = env.config.robot
+    other settings. Of an env, or of the env config it is built from."""
+    config = env.config if isinstance(env, StairEnv) else env
+    robot = config.robot
     return {**{k: getattr(robot, k) for k in PHYSICS["evaluation"]},
-            "decimation": env.config.decimation,
+            "decimation": config.decimation,
             # the robot's own, from the policy's config (or an override): not the preset's
             "joint_damping": robot.joint_damping, "implicit_damping": robot.implicit_damping,
             "head_collision": robot.head_collision, "action_delay_s": robot.action_delay_s}
