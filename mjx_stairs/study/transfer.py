@@ -90,30 +90,10 @@ def matrix(
     for src, path in models.items():
         if rows and src not in rows:
             continue
-        policy, digest = None, _sha256(path)
-        success[src] = {}
-        for dst in families:
-            if columns and dst not in columns:
-                continue
-            dst_spec = dataclasses.replace(spec, family=dst)
-            want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
-                    "robots_per_level": spec.robots_per_level,
-                    "episode_length_s": spec.episode_length_s, "seed": spec.seed,
-                    "eval_physics": spec.physics, "env_overrides": list(spec.env_overrides),
-                    "checkpoint": str(path), "checkpoint_sha256": digest}
-            cell = cells / f"{src}__on__{dst}.json" if cells is not None else None
-            rec = _finished_cell(cell, want) if cell is not None else None
-            if rec is not None:
-                print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
-            else:
-                policy = policy or load_policy(path)
-                rec = evaluate.success_by_level(policy, dst_spec)
-                rec.update(env_overrides=list(spec.env_overrides), checkpoint=str(path),
-                           checkpoint_sha256=digest)
-                if cell is not None:
-                    cell.parent.mkdir(parents=True, exist_ok=True)
-                    atomic.write_text(cell, json.dumps(rec, indent=2))
-            success[src][dst] = rec
+        loaded: list = []  # the policy, loaded once for the row's first cell evaluated
+        digest = _sha256(path)
+        success[src] = {dst: _cell(src, dst, path, digest, loaded, spec, cells)
+                        for dst in families if not columns or dst in columns}
     if partial:
         return {"cells": success}
     mean = {s: {d: float(np.mean(success[s][d]["success"])) for d in families} for s in families}
@@ -133,6 +113,32 @@ def matrix(
         atomic.write_text(d / "transfer.json", json.dumps(out, indent=2))
         atomic.write_text(d / "transfer.md", markdown(out))
     return out
+
+
+def _cell(src: str, dst: str, path: str, digest: str, loaded: list, spec: evaluate.EvalSpec,
+          cells: Path | None) -> dict[str, Any]:
+    """One cell of the matrix: model `src` (policy file `path`, SHA-256 `digest`) on family
+    `dst`, kept from cells/ when it was evaluated there as asked, else evaluated (the policy
+    loaded into `loaded` once per row) and written there."""
+    want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
+            "robots_per_level": spec.robots_per_level,
+            "episode_length_s": spec.episode_length_s, "seed": spec.seed,
+            "eval_physics": spec.physics, "env_overrides": list(spec.env_overrides),
+            "checkpoint": str(path), "checkpoint_sha256": digest}
+    cell = cells / f"{src}__on__{dst}.json" if cells is not None else None
+    rec = _finished_cell(cell, want) if cell is not None else None
+    if rec is not None:
+        print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
+        return rec
+    if not loaded:
+        loaded.append(load_policy(path))
+    rec = evaluate.success_by_level(loaded[0], dataclasses.replace(spec, family=dst))
+    rec.update(env_overrides=list(spec.env_overrides), checkpoint=str(path),
+               checkpoint_sha256=digest)
+    if cell is not None:
+        cell.parent.mkdir(parents=True, exist_ok=True)
+        atomic.write_text(cell, json.dumps(rec, indent=2))
+    return rec
 
 
 def transferability(mean: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
