@@ -177,11 +177,17 @@ class EnvConfig:
     # use the final goal.
     goal_mode: Literal["final", "waypoint"] = "final"
     waypoint_lookahead_m: float = 1.0
+    # Policy steps of history in the observation (env.observation.history_terms: the joint
+    # positions and actions of that many earlier steps); 0: one frame, as every published policy.
+    obs_history: int = 0
 
     def __post_init__(self):
         lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
         fixed = self.robot.action_delay_s
         _require("env", [
+            ("obs_history", self.obs_history,
+             isinstance(self.obs_history, int) and 0 <= self.obs_history <= 50,
+             "an integer in [0, 50] (policy steps)"),
             ("randomization.action_delay_s", lag, lag <= step + 1e-9,
              f"at most one policy step ({step:g} s)"),
             ("robot.action_delay_s", fixed, 0.0 <= fixed <= step + 1e-9,

@@ -47,7 +47,35 @@ VECTOR = (
 """The vector part, in order."""
 
 N_VEC = sum(t.size for t in VECTOR)
-"""Length of the vector part of an observation (before the height map)."""
+"""Length of the vector part of an observation without history (before the height map)."""
+
+
+def history_terms(history: int) -> tuple[ObsTerm, ...]:
+    """The terms of `env.obs_history` policy steps of history (none at 0), after "goal": what a
+    policy needs to tell robots apart that one frame cannot (a long action delay from a short
+    one, docs/deploy.md)."""
+    if history <= 0:
+        return ()
+    return (
+        ObsTerm("joint_pos_history", 12 * history, "rad", "joint_pos", 1.0,
+                f"joint positions minus the nominal pose at the {history} previous policy "
+                "steps (what the joint_pos term of each earlier observation measured), newest "
+                "first, joint_names order within each step; the reset pose before the "
+                "episode's first"),
+        ObsTerm("action_history", 12 * history, "1", None, 1.0,
+                f"the {history} policy actions before last_action, newest first, clipped to "
+                "+-action_clip (zeros before the episode's first)"),
+    )
+
+
+def vector_terms(history: int = 0) -> tuple[ObsTerm, ...]:
+    """The vector part, in order, with `history` steps of history."""
+    return (*VECTOR, *history_terms(history))
+
+
+def n_vec(history: int = 0) -> int:
+    """Length of the vector part with `history` steps of history."""
+    return sum(t.size for t in vector_terms(history))
 
 
 def height_map_term(hm: HeightMapConfig) -> ObsTerm:
@@ -57,21 +85,21 @@ def height_map_term(hm: HeightMapConfig) -> ObsTerm:
                    f"-{hm.clip}, {hm.clip})")
 
 
-def terms(hm: HeightMapConfig) -> tuple[ObsTerm, ...]:
+def terms(hm: HeightMapConfig, history: int = 0) -> tuple[ObsTerm, ...]:
     """Every term of an observation, in order."""
-    return (*VECTOR, height_map_term(hm))
+    return (*vector_terms(history), height_map_term(hm))
 
 
-def size(hm: HeightMapConfig) -> int:
+def size(hm: HeightMapConfig, history: int = 0) -> int:
     """Floats per observation."""
-    return N_VEC + hm.size * hm.size
+    return n_vec(history) + hm.size * hm.size
 
 
 def assemble(values: dict[str, jnp.ndarray], hm: HeightMapConfig, noise: NoiseConfig,
-             rng: jax.Array | None) -> dict[str, jnp.ndarray]:
+             rng: jax.Array | None, history: int = 0) -> dict[str, jnp.ndarray]:
     """{"state", "privileged_state"} [size] from {term name: [term size]}; with ``rng`` None or
     the noise off both are clean."""
-    table = terms(hm)
+    table = terms(hm, history)
     clean = jnp.concatenate([values[t.name] if t.scale == 1.0 else t.scale * values[t.name]
                              for t in table])
     if not noise.enabled or rng is None:

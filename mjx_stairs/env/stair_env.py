@@ -48,6 +48,11 @@ from mjx_stairs.sim import robot as rb
 
 __all__ = ["STEP_INPUTS", "StairEnv"]
 
+
+def _shift_in(history: jnp.ndarray, newest: jnp.ndarray) -> jnp.ndarray:
+    """[H, n] history with `newest` [n] in front and the oldest row dropped."""
+    return jnp.concatenate([newest[None], history[:-1]])
+
 class StairEnv(Env):
     """Go2 climbing the stairs of an atlas. See the module docstring for the step."""
 
@@ -99,7 +104,7 @@ class StairEnv(Env):
 
     @property
     def observation_size(self) -> dict[str, tuple[int, ...]]:
-        n = observation.size(self.config.height_map)
+        n = observation.size(self.config.height_map, self.config.obs_history)
         return {"state": (n,), "privileged_state": (n,)}
 
     @property
@@ -180,6 +185,11 @@ class StairEnv(Env):
             "truncation": jnp.zeros((), jnp.float32),
             **draws,
         }
+        if self.config.obs_history:  # the reset pose at every earlier step, no earlier actions
+            h = self.config.obs_history
+            info["joint_pos_history"] = jnp.tile(qpos[self._ids.qpos_joints] - self._nominal,
+                                                 (h, 1))
+            info["action_history"] = jnp.zeros((h, 12))
         k_noise, info["rng"] = jax.random.split(info["rng"])
         obs = self.observe(qpos, data.qvel, info, k_noise)
         info["final_obs"] = obs
@@ -220,6 +230,10 @@ class StairEnv(Env):
         ends = self._endings(kin, q, info, finite)
         reward = jnp.where(finite, reward, 0.0)
         vj = self._ids.qvel_joints
+        if c.obs_history:  # the joint positions the last observation saw, the action before it
+            seen = state.pipeline_state.qpos[self._ids.qpos_joints] - self._nominal
+            info["joint_pos_history"] = _shift_in(info["joint_pos_history"], seen)
+            info["action_history"] = _shift_in(info["action_history"], info["last_action"])
         info.update(step=info["step"] + 1, last_action=action, last_joint_vel=data.qvel[vj],
                     air_time=jnp.where(foot, 0.0, q.air_time), last_foot_contact=foot,
                     success_count=ends.success_count, success=ends.success)
@@ -348,7 +362,11 @@ class StairEnv(Env):
                                      wrap_angle(goal[3] - kin.yaw)[None]]),
             "height_map": self.height_map(kin.pos, kin.yaw, info["tile"]),
         }
-        obs = observation.assemble(values, self.config.height_map, self.config.noise, rng)
+        if self.config.obs_history:
+            values.update(joint_pos_history=info["joint_pos_history"].reshape(-1),
+                          action_history=info["action_history"].reshape(-1))
+        obs = observation.assemble(values, self.config.height_map, self.config.noise, rng,
+                                   self.config.obs_history)
         return perception.corrupt(obs, info, rng, self.config)
 
     def pack_state(self, state: State) -> dict[str, Any]:

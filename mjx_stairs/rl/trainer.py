@@ -327,11 +327,18 @@ def compiled_chunk(trainer: Trainer, state: TrainState) -> tuple[Callable, float
     return compiled, time.time() - t0
 
 
-def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer) -> TrainState:
+def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
+                      history: int = 0) -> TrainState:
     """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
-    starts from stage 1). The Adam moments, RNG and counters stay fresh."""
+    starts from stage 1). The Adam moments, RNG and counters stay fresh. An experiment with
+    `history` steps of observation history (env.obs_history) starts from a policy without
+    history through policy.widen_for_history: it acts as the saved policy at the start."""
     saved = policy_lib.load_policy(path)
     want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
+    extra = int(state.normalizer["state"].mean.shape[0]) - saved.layout.obs_size
+    if history and extra > 0 and not (policy_lib.saved_config(saved, "env") or {}).get(
+            "obs_history"):
+        saved = policy_lib.widen_for_history(saved, extra)
     got = jax.tree_util.tree_map(jnp.shape, (saved.params, saved.normalizer))
     if want != got:
         raise checkpoint.CheckpointError(

@@ -88,9 +88,21 @@ class _Controller:
         self._act = jax.jit(lambda o: policy_action(policy, o))
         self._info = dict(info)
         self._c = env.config
+        self._joints = np.asarray(env.robot.ids.qpos_joints)
+        self._seen = None  # (joint positions, last action) of the previous call, for history
 
     def __call__(self, qpos: np.ndarray, qvel: np.ndarray, last_action: np.ndarray):
-        """(action [B, 12], PD target [B, 12]) for the robots' state and last action."""
+        """(action [B, 12], PD target [B, 12]) for the robots' state and last action; called
+        once per control step (a policy with history keeps the previous calls' as the env
+        does: env.stair_env's step)."""
+        if self._c.obs_history and self._seen is not None:
+            q, a = self._seen
+            for key, new in (("joint_pos_history", q - rb.NOMINAL_JOINT_POS),
+                             ("action_history", a)):
+                old = np.asarray(self._info[key])
+                self._info[key] = jnp.asarray(np.concatenate([new[:, None], old[:, :-1]], 1),
+                                              jnp.float32)
+        self._seen = (np.asarray(qpos)[:, self._joints], np.asarray(last_action))
         self._info["last_action"] = jnp.asarray(last_action)
         obs = self._observe(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32),
                             self._info)

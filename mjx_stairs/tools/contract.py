@@ -22,6 +22,8 @@ FORMAT = "mjx_stairs policy sidecar v2"
 TERMS = ("base_lin_vel", "base_ang_vel", "projected_gravity", "joint_pos", "joint_vel",
          "last_action", "goal", "height_map")
 """The observation terms this reader knows how to measure."""
+HISTORY_TERMS = ("joint_pos_history", "action_history")
+"""The terms of a policy with history (sidecar 'observation.history_steps' > 0): both or none."""
 
 
 class ContractError(ValueError):
@@ -53,6 +55,7 @@ class Contract:
     goal_mode: str
     lookahead: float
     evaluation: dict[str, Any]
+    history: int = 0  # policy steps of joint positions and actions the observation keeps
 
 
 def sidecar_path(onnx_path: str | os.PathLike) -> Path:
@@ -93,7 +96,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
     size = int(_need(obs, "size", w))
     slices, noise, at = {}, np.zeros(size), 0
     for e in _need(obs, "layout", w):
-        if e["name"] not in TERMS:
+        if e["name"] not in TERMS + HISTORY_TERMS:
             raise ContractError(f"{w}: unknown observation term {e['name']!r}")
         if e["start"] != at:
             raise ContractError(f"{w}: observation term {e['name']!r} starts at {e['start']}, "
@@ -101,7 +104,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         slices[e["name"]] = slice(e["start"], e["stop"])
         noise[e["start"]:e["stop"]] = e.get("training_noise", 0.0)
         at = e["stop"]
-    if at != size or set(slices) != set(TERMS):
+    if at != size or set(slices) - set(HISTORY_TERMS) != set(TERMS):
         raise ContractError(f"{w}: the observation layout covers {at} of {size} floats with "
                             f"terms {sorted(slices)}")
     hm, joints, pd = _need(raw, "height_map", w), _need(raw, "joints", w), _need(raw, "pd", w)
@@ -113,6 +116,11 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
     names = tuple(joints["names"])
     if len(names) != slices["joint_pos"].stop - slices["joint_pos"].start:
         raise ContractError(f"{w}: {len(names)} joint names for the joint_pos term")
+    sizes = [slices[t].stop - slices[t].start for t in HISTORY_TERMS if t in slices]
+    history = int(obs.get("history_steps", 0))
+    if sizes != [len(names) * history] * (2 if history else 0):
+        raise ContractError(f"{w}: history terms of {sizes} floats for history_steps {history} "
+                            f"of {len(names)} joints")
     return Contract(
         raw=raw, obs_size=size, slices=slices, noise=noise, joint_names=names,
         sdk_index=np.asarray(joints["sdk_index"], np.int64),
@@ -124,6 +132,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         hm_size=n, hm_offset=float(hm["offset_m"]), hm_clip=float(hm["clip_m"]),
         hm_xy=np.stack([gx.ravel(), gy.ravel()], -1), goal_mode=str(goal["mode"]),
         lookahead=float(goal["lookahead_m"] or 0.0), evaluation=dict(raw.get("evaluation", {})),
+        history=history,
     )
 
 
@@ -176,6 +185,29 @@ class Measurement(NamedTuple):
     last_action: np.ndarray  # [12] the previous clipped action
     target: np.ndarray  # [4] (x, y, z, yaw) world: the goal the policy is given (goal_target)
     terrain_z: np.ndarray  # [S * S] m, terrain height at map_points
+    # with history (Contract.history = H > 0; History keeps them): [H, 12] the encoder readings
+    # of the H previous observations and [H, 12] the actions before last_action, newest first
+    joint_pos_history: np.ndarray | None = None
+    action_history: np.ndarray | None = None
+
+
+class History:
+    """What a runner keeps for a policy with history (the sidecar's 'observation.history'):
+    the joint positions and last actions of the `contract.history` previous observations."""
+
+    def __init__(self, c: Contract, joint_pos: np.ndarray):
+        """At the episode's start: the reset pose (encoder readings) and no earlier actions."""
+        self.clip = c.action_clip
+        self.joint_pos = np.tile(np.asarray(joint_pos, np.float64), (c.history, 1))
+        self.actions = np.zeros((c.history, len(c.joint_names)))
+
+    def push(self, m: Measurement) -> None:
+        """After an observation of `m` went to the policy: its joint_pos and last_action in
+        front, the oldest dropped."""
+        if len(self.joint_pos):
+            self.joint_pos = np.vstack([m.joint_pos, self.joint_pos[:-1]])
+            a = np.clip(m.last_action, -self.clip, self.clip)
+            self.actions = np.vstack([a, self.actions[:-1]])
 
 
 def base_yaw(rot: np.ndarray) -> float:
@@ -236,6 +268,13 @@ def observation(c: Contract, m: Measurement) -> np.ndarray:
         "height_map": np.clip(np.nan_to_num(height, nan=c.hm_clip, posinf=c.hm_clip),
                               -c.hm_clip, c.hm_clip),
     }
+    if c.history:
+        if m.joint_pos_history is None or m.action_history is None:
+            raise ContractError(f"the policy observes {c.history} steps of history: the "
+                                "measurement needs joint_pos_history and action_history (History)")
+        values["joint_pos_history"] = (np.asarray(m.joint_pos_history) - c.nominal).ravel()
+        values["action_history"] = np.clip(m.action_history, -c.action_clip,
+                                           c.action_clip).ravel()
     out = np.zeros(c.obs_size, np.float64)
     for name, sl in c.slices.items():
         out[sl] = values[name]

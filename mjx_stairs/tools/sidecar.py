@@ -47,6 +47,7 @@ def _clip_ranges(cfg: EnvConfig) -> dict[str, list[float] | None]:
     """[lo, hi] each term is clipped to before it enters the graph (None: not clipped)."""
     hm = cfg.height_map
     return {"last_action": [-cfg.action_clip, cfg.action_clip],
+            "action_history": [-cfg.action_clip, cfg.action_clip],
             "height_map": [-hm.clip, hm.clip]}
 
 
@@ -62,7 +63,7 @@ def _goal_description(cfg: EnvConfig, desc: str) -> str:
 def _layout(cfg: EnvConfig) -> list[dict[str, Any]]:
     hm, clips = cfg.height_map, _clip_ranges(cfg)
     entries, i = [], 0
-    for term in observation.terms(hm):
+    for term in observation.terms(hm, cfg.obs_history):
         desc = term.description
         if term.name == "goal":
             desc = _goal_description(cfg, desc)
@@ -196,10 +197,11 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
     """
     cfg = env_config_from(saved_config(policy, "env"))
     layout, hm = policy.layout, cfg.height_map
-    if layout.n_vec != observation.N_VEC or tuple(layout.map_shape) != (hm.size, hm.size):
+    n_vec = observation.n_vec(cfg.obs_history)
+    if layout.n_vec != n_vec or tuple(layout.map_shape) != (hm.size, hm.size):
         raise SidecarError(
             f"policy layout (vec {layout.n_vec}, map {tuple(layout.map_shape)}) is not the stair "
-            f"env's (vec {observation.N_VEC}, map {(hm.size, hm.size)})")
+            f"env's (vec {n_vec}, map {(hm.size, hm.size)})")
     robot = cfg.robot
     dt = robot.timestep * cfg.decimation
     norm = normaliser_constants(policy)
@@ -222,6 +224,11 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
             "noise": (f"the graph adds no noise; training added uniform noise of the given "
                       f"half-widths ({'on' if cfg.noise.enabled else 'off'} in training)"),
             "frames": "base (body) frame: x forward, y left, z up; world z up",
+            "history_steps": cfg.obs_history,
+            "history": "with history_steps > 0: after building each observation, put its "
+                       "joint_pos (before nominal is subtracted: the encoder reading) and its "
+                       "last_action in front of the kept histories and drop the oldest; at the "
+                       "episode's start both are filled with the reset pose and zeros",
         },
         "normalizer": None if norm is None else {
             "applied_in_graph": True, "clip": norm[2], "std_eps": STD_EPS,

@@ -114,6 +114,8 @@ class Sim:
         d.qpos[w.qpos_adr] = self.c.nominal
         mujoco.mj_forward(m, d)
         self.last_action = np.zeros(len(self.c.joint_names))
+        self.history = ct.History(self.c, d.qpos[w.qpos_adr])
+        self.seen: ct.Measurement | None = None  # what the last observation measured
         self.active = self.c.nominal.copy()
         self.pending: collections.deque = collections.deque()
         self.touching = np.zeros(m.ngeom, bool)
@@ -140,11 +142,13 @@ class Sim:
             ang_vel=v[3:6].copy(), base_rot=rot, base_pos=pos, lin_vel=rot.T @ v[:3],
             last_action=self.last_action,
             target=ct.goal_target(c, pos[:2], self.course.goal, self.course.route),
-            terrain_z=sw.terrain_z(w, xy))
+            terrain_z=sw.terrain_z(w, xy), joint_pos_history=self.history.joint_pos,
+            action_history=self.history.actions)
 
     def observe(self) -> np.ndarray:
         """The observation [D] (with the training noise when `options.noise`)."""
-        obs = ct.observation(self.c, self.measure())
+        self.seen = self.measure()
+        obs = ct.observation(self.c, self.seen)
         if self.o.noise:
             obs = obs + (self.c.noise * self.rng.uniform(-1, 1, obs.shape)).astype(np.float32)
         return obs
@@ -155,6 +159,9 @@ class Sim:
         """Run the policy, send its PD target, hold it for one control period; -> action."""
         a, target = ct.action_to_target(self.c, self.policy(obs))
         self.pending.append((self.n + self.delay, target))
+        if self.seen is not None:  # the observation the policy acted on joins the history
+            self.history.push(self.seen)
+            self.seen = None
         self.last_action = a
         if self.o.push:
             self._maybe_push()

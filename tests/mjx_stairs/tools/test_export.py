@@ -26,12 +26,15 @@ N_VEC, MAP = observation.N_VEC, (21, 21)  # the default height map
 D = N_VEC + MAP[0] * MAP[1]
 
 
-def _policy_state(seed: int = 0):
+def _policy_state(seed: int = 0, history: int = 0):
     """Params of the real architecture with non-trivial biases and an actor output of order 1,
-    and a normaliser with varied means and stds (some tiny, so the clip is active)."""
+    and a normaliser with varied means and stds (some tiny, so the clip is active); `history`:
+    the observation's steps of history (env.obs_history)."""
     cfg = ExperimentConfig()
+    n_vec = observation.n_vec(history)
+    d = n_vec + MAP[0] * MAP[1]
     k = jax.random.split(jax.random.PRNGKey(seed), 8)
-    params = networks.init_params(k[0], cfg.network, N_VEC, MAP, 12)
+    params = networks.init_params(k[0], cfg.network, n_vec, MAP, 12)
     params["actor"][-1]["w"] = params["actor"][-1]["w"] * 20.0  # actions of order 1, as trained
     paths, treedef = jax.tree_util.tree_flatten_with_path(params)
     keys = jax.random.split(k[1], len(paths))
@@ -40,10 +43,10 @@ def _policy_state(seed: int = 0):
     params = jax.tree_util.tree_unflatten(treedef, leaves)
     stats = normalizer.RunningStats(
         count=jnp.asarray(1000.0, jnp.float32),
-        mean=jax.random.normal(k[2], (D,)),
-        m2=1000.0 * jnp.exp(2.0 * jax.random.uniform(k[3], (D,), minval=-1.5, maxval=1.0)),
+        mean=jax.random.normal(k[2], (d,)),
+        m2=1000.0 * jnp.exp(2.0 * jax.random.uniform(k[3], (d,), minval=-1.5, maxval=1.0)),
     )
-    norm = {"state": stats, "privileged_state": normalizer.init_stats(D)}
+    norm = {"state": stats, "privileged_state": normalizer.init_stats(d)}
     return types.SimpleNamespace(params=params, normalizer=norm,
                                  iteration=jnp.asarray(7, jnp.int32)), cfg
 

@@ -21,6 +21,7 @@ pytest.importorskip("onnxruntime")
 
 import terrains  # noqa: E402
 from mjx_stairs import cli  # noqa: E402
+from mjx_stairs.env import observation  # noqa: E402
 from mjx_stairs.env.config import env_config_from, evaluation_config  # noqa: E402
 from mjx_stairs.env.stair_env import StairEnv  # noqa: E402
 from mjx_stairs.rl import networks  # noqa: E402
@@ -36,15 +37,16 @@ ROOT = Path(__file__).resolve().parents[3]
 STAGE2 = ROOT / "experiments" / "results" / "stage2_u" / "policy.npz"
 
 
-def _export(tmp, mode: str) -> tuple[Path, policy_lib.Policy]:
-    """A policy of the real architecture (goal `mode`) exported to ONNX + sidecar."""
-    state, cfg = _policy_state()
+def _export(tmp, mode: str, history: int = 0) -> tuple[Path, policy_lib.Policy]:
+    """A policy of the real architecture (goal `mode`, `history` steps of observation history)
+    exported to ONNX + sidecar."""
+    state, cfg = _policy_state(history=history)
     path = tmp / "policy.npz"
     policy_lib.save_policy(path, state.params, state.normalizer, 7, cfg,
-                           networks.ObsLayout(N_VEC, MAP))
+                           networks.ObsLayout(observation.n_vec(history), MAP))
     policy = policy_lib.load_policy(path)
     meta = copy.deepcopy(policy.metadata)
-    meta["config"]["env"].update(goal_mode=mode, waypoint_lookahead_m=1.0)
+    meta["config"]["env"].update(goal_mode=mode, waypoint_lookahead_m=1.0, obs_history=history)
     policy = policy._replace(metadata=meta)
     export.export_policy(policy, tmp / "policy.onnx")
     return tmp / "policy.onnx", policy
@@ -152,6 +154,72 @@ def _sdk_ordered_copy(tmp: Path) -> Path:
     path = tmp / "go2_sdk_order.xml"
     path.write_text(text.replace("".join(motors), sdk))
     return path
+
+
+@pytest.fixture(scope="module")
+def history_onnx(tmp_path_factory):
+    """A policy that observes 2 steps of history (env.obs_history), exported."""
+    return _export(tmp_path_factory.mktemp("history"), "final", history=2)
+
+
+def test_history_terms_are_placed_as_the_training_env_places_them(history_onnx):
+    """The robot side's history terms (encoder readings and actions kept by ct.History) land
+    where the env's observation has them, with the same values."""
+    onnx_path, policy = history_onnx
+    c = ct.load_contract(onnx_path)
+    cfg = evaluation_config(env_config_from(policy.metadata["config"]["env"]))
+    assert c.history == 2 and cfg.obs_history == 2
+    assert c.obs_size == observation.size(cfg.height_map, 2) == policy.layout.obs_size
+    atlas = terrains.build_cell_atlas([("straight", "test", 0)], 1, resolution=0.1,
+                                      tile_size=10.0, border=1.0)
+    env = StairEnv(atlas, cfg)
+    rng = np.random.default_rng(2)
+    encoders = rb.NOMINAL_JOINT_POS + rng.uniform(-0.4, 0.4, (2, 12))
+    actions = rng.uniform(-7.0, 7.0, (2, 12))  # beyond the clip of 5: both sides clip
+    n = c.hm_size * c.hm_size
+    m = ct.Measurement(rb.NOMINAL_JOINT_POS, np.zeros(12), np.zeros(3), np.eye(3),
+                       np.zeros(3), np.zeros(3), np.zeros(12), np.zeros(4), np.zeros(n),
+                       joint_pos_history=encoders, action_history=actions)
+    ours = ct.observation(c, m)
+    qpos = np.concatenate([atlas.spawn[0][:2], [0.4, 1.0, 0, 0, 0], rb.NOMINAL_JOINT_POS])
+    info = {"tile": jnp.int32(0), "last_action": jnp.zeros(12),
+            "joint_pos_history": jnp.asarray(encoders - rb.NOMINAL_JOINT_POS, jnp.float32),
+            "action_history": jnp.asarray(np.clip(actions, -5, 5), jnp.float32)}
+    theirs = np.asarray(env.observe(jnp.asarray(qpos, jnp.float32), jnp.zeros(18), info)["state"])
+    for name in ct.HISTORY_TERMS:
+        np.testing.assert_allclose(ours[c.slices[name]], theirs[c.slices[name]], atol=1e-6)
+        assert np.ptp(ours[c.slices[name]]) > 0.5
+    with pytest.raises(ct.ContractError, match="needs joint_pos_history"):
+        ct.observation(c, m._replace(joint_pos_history=None))
+
+
+def test_sim2sim_keeps_the_history_the_policy_acted_on(history_onnx, tmp_path):
+    """Newest first: after each action, the observation it acted on (its joint positions and
+    its last action) joins the history; at the start both hold the reset pose and zeros."""
+    sim = _sim(history_onnx[0], policy=lambda obs: np.full(12, 0.4))
+    sl = sim.c.slices
+    o1 = sim.observe()
+    np.testing.assert_allclose(o1[sl["joint_pos_history"]], np.tile(o1[sl["joint_pos"]], 2),
+                               atol=1e-6)
+    assert np.all(o1[sl["action_history"]] == 0.0)
+    sim.act(o1)
+    o2 = sim.observe()
+    sim.act(o2)
+    o3 = sim.observe()
+    assert np.abs(o3[sl["joint_pos"]] - o2[sl["joint_pos"]]).max() > 1e-3  # the joints moved
+    np.testing.assert_allclose(o3[sl["joint_pos_history"]],
+                               np.concatenate([o2[sl["joint_pos"]], o1[sl["joint_pos"]]]),
+                               atol=1e-6)
+    np.testing.assert_allclose(o3[sl["action_history"]],
+                               np.concatenate([o2[sl["last_action"]], o1[sl["last_action"]]]))
+    assert np.all(o3[sl["action_history"]][:12] == 0.4)
+    side = json.loads(ct.sidecar_path(history_onnx[0]).read_text())  # a history that does not
+    side["observation"]["history_steps"] = 3  # fit its terms: a one-line error
+    bad = tmp_path / "policy.onnx"
+    bad.write_bytes(history_onnx[0].read_bytes())
+    ct.sidecar_path(bad).write_text(json.dumps(side))
+    with pytest.raises(ct.ContractError, match="history_steps 3"):
+        ct.load_contract(bad)
 
 
 def test_motors_in_sdk_order_give_the_same_torque_on_every_named_joint(onnx_file, tmp_path):
