@@ -12,7 +12,8 @@
 # are in git show b53571c:experiments/gpu/, e.g. session_eval4.sh): stage1, stage2, ablation,
 # stage2-final-goal, report (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean
 # (the lean physics and its check in the reference physics), straight-lean, l-shaped-lean,
-# spiral-lean, transfer-lean (Tables 1-2), generalist, eval-generalist, bench-generalist (issue 24),
+# spiral-lean, transfer-lean (Tables 1-2), generalist, generalist-history, eval-generalist,
+# bench-generalist (issue 24),
 # bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml), scaling (bench
 # --devices over the GPUs visible), two-processes (one process on two GPUs against two processes
 # through jax.distributed), eval-committed (committed policies in the reference physics), code-suite
@@ -289,6 +290,8 @@ run_step() {
     # physics); resumes from .carry/generalist/. bench-generalist: its physics-only rate at 4096
     # robots on its own atlas, for the training rate the run logs
     generalist) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist experiments/generalist.toml ;;
+    generalist-history) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_history \
+        experiments/generalist_history.toml ;;  # the same with 3 steps of observation history
     # the generalist (GEN_POLICY, else the one trained in this command, else carried) on the
     # paper's test levels of the four families, 1000 robots per level, up then down
     # (GEN_DIRECTIONS), each cut at the deadline
