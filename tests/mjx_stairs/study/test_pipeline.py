@@ -1,6 +1,7 @@
 """End to end on the CPU: the real stair env trained for two iterations through the CLI, then
 evaluation, the EXP1 report, the transfer matrix and the bench on what it produced."""
 
+import copy
 import dataclasses
 import json
 import math
@@ -12,7 +13,7 @@ import pytest
 from mjx_stairs import cli
 from mjx_stairs.config import ConfigError
 from mjx_stairs.env import observation
-from mjx_stairs.rl.policy import load_policy
+from mjx_stairs.rl.policy import load_policy, widen_for_history
 from mjx_stairs.study import bench, critic_map, evaluate, exp1, experiment, plots, transfer
 
 TINY = evaluate.EvalSpec(levels=(0, 5), robots_per_level=2, episode_length_s=1.0, resolution=0.05)
@@ -94,6 +95,15 @@ def test_critic_map_covers_the_tile_and_blanks_walls(trained):
     walkable = np.isfinite(v)
     assert 0.1 < walkable.mean() < 0.9  # the staircase is walkable, the walls around it are not
     assert np.ptp(v[walkable]) > 0  # the critic sees different places differently
+    # a policy with observation history (env.obs_history): valued standing at the nominal pose
+    # with no earlier actions; the same policy widened for history values every cell as before
+    plain = load_policy(trained / "stage1" / "policy.npz")
+    wide = widen_for_history(plain, observation.n_vec(2) - observation.N_VEC)
+    meta = copy.deepcopy(wide.metadata)
+    meta["config"]["env"]["obs_history"] = 2
+    h = critic_map.critic_map(wide._replace(metadata=meta), "u_shaped", 2, spacing=0.25,
+                              resolution=0.05)
+    np.testing.assert_allclose(h["value"], v, atol=1e-4)
 
 
 def test_transfer_matrix_and_transferability(trained, tmp_path, monkeypatch):
