@@ -68,6 +68,11 @@ def history_terms(history: int) -> tuple[ObsTerm, ...]:
     )
 
 
+def shift_in(history: jnp.ndarray, newest: jnp.ndarray) -> jnp.ndarray:
+    """[..., H, n] history with `newest` [..., n] in front and the oldest row dropped."""
+    return jnp.concatenate([newest[..., None, :], history[..., :-1, :]], axis=-2)
+
+
 def vector_terms(history: int = 0) -> tuple[ObsTerm, ...]:
     """The vector part, in order, with `history` steps of history."""
     return (*VECTOR, *history_terms(history))

@@ -48,11 +48,6 @@ from mjx_stairs.sim import robot as rb
 
 __all__ = ["STEP_INPUTS", "StairEnv"]
 
-
-def _shift_in(history: jnp.ndarray, newest: jnp.ndarray) -> jnp.ndarray:
-    """[H, n] history with `newest` [n] in front and the oldest row dropped."""
-    return jnp.concatenate([newest[None], history[:-1]])
-
 class StairEnv(Env):
     """Go2 climbing the stairs of an atlas. See the module docstring for the step."""
 
@@ -184,17 +179,23 @@ class StairEnv(Env):
             "success": jnp.zeros((), jnp.float32),
             "truncation": jnp.zeros((), jnp.float32),
             **draws,
+            **self.history_start(qpos[self._ids.qpos_joints] - self._nominal),
         }
-        if self.config.obs_history:  # the reset pose at every earlier step, no earlier actions
-            h = self.config.obs_history
-            info["joint_pos_history"] = jnp.tile(qpos[self._ids.qpos_joints] - self._nominal,
-                                                 (h, 1))
-            info["action_history"] = jnp.zeros((h, 12))
         k_noise, info["rng"] = jax.random.split(info["rng"])
         obs = self.observe(qpos, data.qvel, info, k_noise)
         info["final_obs"] = obs
         zero = jnp.zeros((), jnp.float32)  # float32 also when the physics runs in float64
         return State(data, obs, zero, zero, {k: zero for k in self.metric_names()}, info)
+
+    def history_start(self, joint_pos: jnp.ndarray) -> dict[str, jnp.ndarray]:
+        """The info keys of the observation history (env.obs_history; none without) at an
+        episode's start with the joints at `joint_pos` (minus the nominal pose): that pose at
+        every earlier step, no earlier actions."""
+        h = self.config.obs_history
+        if not h:
+            return {}
+        return {"joint_pos_history": jnp.tile(joint_pos, (h, 1)),
+                "action_history": jnp.zeros((h, 12))}
 
     def _spawn_robot(self, rng: jax.Array, tile: jnp.ndarray) -> tuple[jnp.ndarray, dict]:
         """qpos [19] on the tile's spawn area and this episode's randomisation draws."""
@@ -232,8 +233,9 @@ class StairEnv(Env):
         vj = self._ids.qvel_joints
         if c.obs_history:  # the joint positions the last observation saw, the action before it
             seen = state.pipeline_state.qpos[self._ids.qpos_joints] - self._nominal
-            info["joint_pos_history"] = _shift_in(info["joint_pos_history"], seen)
-            info["action_history"] = _shift_in(info["action_history"], info["last_action"])
+            info["joint_pos_history"] = observation.shift_in(info["joint_pos_history"], seen)
+            info["action_history"] = observation.shift_in(info["action_history"],
+                                                          info["last_action"])
         info.update(step=info["step"] + 1, last_action=action, last_joint_vel=data.qvel[vj],
                     air_time=jnp.where(foot, 0.0, q.air_time), last_foot_contact=foot,
                     success_count=ends.success_count, success=ends.success)

@@ -72,10 +72,8 @@ def values_on_tile(policy: Policy, env, tile: int, spacing: float = 0.1) -> dict
     def obs_at(x, y, psi):
         z = env.terrain_height(x, y) + NOMINAL_BASE_HEIGHT
         qpos = jnp.concatenate([jnp.stack([x, y, z]), yaw_quat(psi), NOMINAL_JOINT_POS])
-        info = {"tile": jnp.int32(tile), "last_action": jnp.zeros(12)}
-        if env.config.obs_history:  # standing at the nominal pose, as after a reset there
-            still = jnp.zeros((env.config.obs_history, 12))
-            info.update(joint_pos_history=still, action_history=still)
+        info = {"tile": jnp.int32(tile), "last_action": jnp.zeros(12),
+                **env.history_start(jnp.zeros(12))}  # standing at the nominal pose
         return env.observe(qpos, jnp.zeros(18), info)["privileged_state"]
 
     obs = jax.jit(jax.vmap(obs_at))(

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 from mujoco.mjx._src import support
 
-from mjx_stairs.env import endings
+from mjx_stairs.env import endings, observation
 from mjx_stairs.env import stair_env as envlib
 from mjx_stairs.env.geometry import quat_yaw
 from mjx_stairs.rl.policy import Policy, policy_action
@@ -99,9 +99,8 @@ class _Controller:
             q, a = self._seen
             for key, new in (("joint_pos_history", q - rb.NOMINAL_JOINT_POS),
                              ("action_history", a)):
-                old = np.asarray(self._info[key])
-                self._info[key] = jnp.asarray(np.concatenate([new[:, None], old[:, :-1]], 1),
-                                              jnp.float32)
+                self._info[key] = observation.shift_in(self._info[key],
+                                                       jnp.asarray(new, jnp.float32))
         self._seen = (np.asarray(qpos)[:, self._joints], np.asarray(last_action))
         self._info["last_action"] = jnp.asarray(last_action)
         obs = self._observe(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32),

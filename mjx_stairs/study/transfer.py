@@ -7,10 +7,11 @@ on B over the success of B's own model on B, each averaged over test levels 3 an
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -90,9 +91,9 @@ def matrix(
     for src, path in models.items():
         if rows and src not in rows:
             continue
-        loaded: list = []  # the policy, loaded once for the row's first cell evaluated
+        load = functools.cache(functools.partial(load_policy, path))  # once, if evaluated
         digest = _sha256(path)
-        success[src] = {dst: _cell(src, dst, path, digest, loaded, spec, cells)
+        success[src] = {dst: _cell(src, dst, path, digest, load, spec, cells)
                         for dst in families if not columns or dst in columns}
     if partial:
         return {"cells": success}
@@ -115,11 +116,11 @@ def matrix(
     return out
 
 
-def _cell(src: str, dst: str, path: str, digest: str, loaded: list, spec: evaluate.EvalSpec,
-          cells: Path | None) -> dict[str, Any]:
-    """One cell of the matrix: model `src` (policy file `path`, SHA-256 `digest`) on family
-    `dst`, kept from cells/ when it was evaluated there as asked, else evaluated (the policy
-    loaded into `loaded` once per row) and written there."""
+def _cell(src: str, dst: str, path: str, digest: str, load: Callable[[], Any],
+          spec: evaluate.EvalSpec, cells: Path | None) -> dict[str, Any]:
+    """One cell of the matrix: model `src` (policy file `path`, SHA-256 `digest`, `load()` its
+    policy) on family `dst`, kept from cells/ when it was evaluated there as asked, else
+    evaluated and written there."""
     want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
             "robots_per_level": spec.robots_per_level,
             "episode_length_s": spec.episode_length_s, "seed": spec.seed,
@@ -130,9 +131,7 @@ def _cell(src: str, dst: str, path: str, digest: str, loaded: list, spec: evalua
     if rec is not None:
         print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
         return rec
-    if not loaded:
-        loaded.append(load_policy(path))
-    rec = evaluate.success_by_level(loaded[0], dataclasses.replace(spec, family=dst))
+    rec = evaluate.success_by_level(load(), dataclasses.replace(spec, family=dst))
     rec.update(env_overrides=list(spec.env_overrides), checkpoint=str(path),
                checkpoint_sha256=digest)
     if cell is not None:
