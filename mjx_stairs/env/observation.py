@@ -68,6 +68,16 @@ def history_terms(history: int) -> tuple[ObsTerm, ...]:
     )
 
 
+def history_start(history: int, joint_pos: jnp.ndarray) -> dict[str, jnp.ndarray]:
+    """The env info's history keys (none at `history` 0) at an episode's start with the joints
+    at `joint_pos` (minus the nominal pose): that pose at every earlier step, no earlier
+    actions."""
+    if not history:
+        return {}
+    return {"joint_pos_history": jnp.tile(joint_pos, (history, 1)),
+            "action_history": jnp.zeros((history, 12))}
+
+
 def shift_in(history: jnp.ndarray, newest: jnp.ndarray) -> jnp.ndarray:
     """[..., H, n] history with `newest` [..., n] in front and the oldest row dropped."""
     return jnp.concatenate([newest[..., None, :], history[..., :-1, :]], axis=-2)

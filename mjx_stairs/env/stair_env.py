@@ -179,23 +179,14 @@ class StairEnv(Env):
             "success": jnp.zeros((), jnp.float32),
             "truncation": jnp.zeros((), jnp.float32),
             **draws,
-            **self.history_start(qpos[self._ids.qpos_joints] - self._nominal),
+            **observation.history_start(self.config.obs_history,
+                                        qpos[self._ids.qpos_joints] - self._nominal),
         }
         k_noise, info["rng"] = jax.random.split(info["rng"])
         obs = self.observe(qpos, data.qvel, info, k_noise)
         info["final_obs"] = obs
         zero = jnp.zeros((), jnp.float32)  # float32 also when the physics runs in float64
         return State(data, obs, zero, zero, {k: zero for k in self.metric_names()}, info)
-
-    def history_start(self, joint_pos: jnp.ndarray) -> dict[str, jnp.ndarray]:
-        """The info keys of the observation history (env.obs_history; none without) at an
-        episode's start with the joints at `joint_pos` (minus the nominal pose): that pose at
-        every earlier step, no earlier actions."""
-        h = self.config.obs_history
-        if not h:
-            return {}
-        return {"joint_pos_history": jnp.tile(joint_pos, (h, 1)),
-                "action_history": jnp.zeros((h, 12))}
 
     def _spawn_robot(self, rng: jax.Array, tile: jnp.ndarray) -> tuple[jnp.ndarray, dict]:
         """qpos [19] on the tile's spawn area and this episode's randomisation draws."""

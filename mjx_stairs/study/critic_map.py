@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_stairs.env import observation
 from mjx_stairs.env.geometry import yaw_quat
 from mjx_stairs.rl.policy import Policy, policy_value
 from mjx_stairs.sim.robot import NOMINAL_BASE_HEIGHT, NOMINAL_JOINT_POS
@@ -73,7 +74,7 @@ def values_on_tile(policy: Policy, env, tile: int, spacing: float = 0.1) -> dict
         z = env.terrain_height(x, y) + NOMINAL_BASE_HEIGHT
         qpos = jnp.concatenate([jnp.stack([x, y, z]), yaw_quat(psi), NOMINAL_JOINT_POS])
         info = {"tile": jnp.int32(tile), "last_action": jnp.zeros(12),
-                **env.history_start(jnp.zeros(12))}  # standing at the nominal pose
+                **observation.history_start(env.config.obs_history, jnp.zeros(12))}  # nominal pose
         return env.observe(qpos, jnp.zeros(18), info)["privileged_state"]
 
     obs = jax.jit(jax.vmap(obs_at))(
