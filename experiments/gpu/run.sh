@@ -13,7 +13,7 @@
 # stage2-final-goal, report (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean
 # (the lean physics and its check in the reference physics), straight-lean, l-shaped-lean,
 # spiral-lean, transfer-lean (Tables 1-2), generalist, generalist-history, eval-generalist,
-# bench-generalist (issue 24),
+# bench-generalist (issue 24), time-to-climber (issue 22),
 # bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml), scaling (bench
 # --devices over the GPUs visible), two-processes (one process on two GPUs against two processes
 # through jax.distributed), eval-committed (committed policies in the reference physics), code-suite
@@ -303,6 +303,17 @@ run_step() {
           --family straight l_shaped u_shaped spiral --direction "$dir" \
           --out "$OUT/generalist_eval/$dir" 2>&1 | grep -v warp
       done ;;
+    # issue 22: from nothing to a stage-2 climber, timed end to end (experiments/gpu/
+    # time_to_climber.py: stage 1 TTC_STAGE1 iterations, stage 2 TTC_STAGE2, each its own
+    # process, compile included; then the U test levels, 1000 robots, evaluation physics), with
+    # the lean configs (TTC_CONFIGS "stage1.toml+stage2.toml" for others) into $OUT/time_to_climber/
+    time-to-climber)
+      cfg=${TTC_CONFIGS:-experiments/stage1_lean.toml+experiments/stage2_u_lean.toml}
+      timeout $(( $(left) - 15 )) python3 experiments/gpu/time_to_climber.py \
+        "$OUT/time_to_climber${TTC_NAME:+_$TTC_NAME}" --stage1 "${cfg%%+*}" --stage2 "${cfg##*+}" \
+        --stage1-iterations "${TTC_STAGE1:-600}" --stage2-iterations "${TTC_STAGE2:-290}" \
+        --log-dir /tmp/ttc_runs --set network.conv_impl=fused_bf16 ${TRAIN_ARGS:-} 2>&1 \
+        | grep -v warp ;;
     bench-generalist) bench "$OUT/bench/generalist_physics.json" experiments/generalist.toml \
         --robots 4096 --parts physics ;;
     # throughput: (a) physics, (b) env, (r) rollout, (c) training at 4096 and 16 384 robots, in the
@@ -351,6 +362,8 @@ run_step() {
       for p in /tmp/policies/stage2_u_*_s[0-9]*.npz .carry/stage2_u_*_s[0-9]*/policy.npz; do
         name=$(basename "$p" .npz); [ "$name" = policy ] && name=$(basename "$(dirname "$p")")
         case $name in stage2_u_paper*) continue ;; esac
+        # PHYSICS_NAMES (a+b): only those (two GPUs judging two policies)
+        [ -n "${PHYSICS_NAMES:-}" ] && [[ "+$PHYSICS_NAMES+" != *"+$name+"* ]] && continue
         d="$OUT/physics_eval/$name"; mkdir -p "$d"
         for fam in u_shaped straight; do
           [ -f "$d/$fam/results.json" ] && continue
