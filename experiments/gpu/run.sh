@@ -393,8 +393,13 @@ run_step() {
     code-suite)
       args=(${CODE_SUITE_ARGS:-})  # CODE_POLICIES (a+b, NAME=FILE for an uncommitted one; a
       # gpuN: token cannot hold a comma): the suite step for those policies only
-      [ -n "${CODE_POLICIES:-}" ] && args+=(--steps suite --policies "${CODE_POLICIES//+/,}")
-      [ -n "${CODE_MESH:-}" ] && args+=(--steps mesh --mesh-policies "${CODE_MESH//+/,}")
+      # both: one --steps suite,mesh (a second --steps flag replaced the first: 2026-11-27's
+      # CODE_POLICIES=generalist_robot,CODE_MESH=generalist_robot ran the mesh step only)
+      steps=(); [ -n "${CODE_POLICIES:-}" ] && steps+=(suite); [ -n "${CODE_MESH:-}" ] && steps+=(mesh)
+      [ ${#steps[@]} -gt 0 ] && args+=(--steps "$(IFS=,; echo "${steps[*]}")")
+      [ -n "${CODE_POLICIES:-}" ] && args+=(--policies "${CODE_POLICIES//+/,}")
+      [ -n "${CODE_MESH:-}" ] && args+=(--mesh-policies "${CODE_MESH//+/,}")
+      [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 experiments/gpu/code_suite.py "$OUT/code_suite" \
         "${args[@]}" 2>&1 | grep -v warp ;;
     # issue 19 (docs/results.md section 5b): the published policies in MJX physics options on the
