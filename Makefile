@@ -20,7 +20,7 @@ TEST_WORKERS ?= 2
 # of 5.8). Flags already in XLA_FLAGS come after these, so they win. bench keeps the defaults.
 CPU_XLA := $(if $(HAS_GPU),,XLA_FLAGS="--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1 $$XLA_FLAGS")
 
-.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-stage2-paper train-stage2-robot train-generalist ablation eval exp1 transfer-matrix bench clean-venv
+.PHONY: setup test lint train-stage1 train-stage2 train-stage2-fast train-stage2-paper train-stage2-robot train-generalist ablation eval exp1 transfer-matrix bench time-to-climber clean-venv
 
 $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
@@ -69,6 +69,10 @@ transfer-matrix: $(SETUP)
 
 bench: $(SETUP)
 	$(PY) -m mjx_stairs bench $(ARGS)
+
+time-to-climber: $(SETUP)  # issue 22: stage 1 + stage 2 from nothing (lean physics), timed, judged (GPU; CPU smoke: ARGS="--stage1-iterations 2 --stage2-iterations 2 --robots 4")
+	$(CPU_XLA) $(PY) experiments/gpu/time_to_climber.py runs/time_to_climber \
+	  $(if $(HAS_GPU),--set network.conv_impl=fused_bf16,) $(ARGS)
 
 clean-venv:
 	rm -rf $(VENV)

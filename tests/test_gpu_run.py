@@ -44,3 +44,26 @@ def test_gpu_groups_run_their_steps_pinned_with_their_variables(tmp_path):
     assert "unknown step no-such-step" in logs[1]
     assert "== gpu0: gpus done" in logs[0] and "== gpu1: gpus done" in logs[1]
     assert "== gpu1.log:" in run.stdout  # waited for, and its log shown
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+@pytest.mark.parametrize("variables, expected", [
+    ({"CODE_POLICIES": "a+b=x.npz", "CODE_MESH": "c"},
+     "--steps suite,mesh --policies a,b=x.npz --mesh-policies c"),
+    ({"CODE_POLICIES": "a"}, "--steps suite --policies a"),
+    ({"CODE_MESH": "c+d"}, "--steps mesh --mesh-policies c,d"),
+])
+def test_code_suite_step_runs_every_step_asked_for(tmp_path, variables, expected):
+    """code-suite passes one --steps for both CODE_POLICIES and CODE_MESH (two --steps flags
+    ran the last one only, 2026-11-27). python3 is a stand-in that records its arguments."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    calls = tmp_path / "calls.txt"
+    (bin_dir / "python3").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n')
+    (bin_dir / "python3").chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
+           "HOME": str(tmp_path), **variables}
+    subprocess.run(["bash", str(RUN), "200", "code-suite"], env=env, capture_output=True,
+                   text=True, timeout=60, cwd=RUN.parents[2], check=True)
+    (call,) = [c for c in calls.read_text().splitlines() if "code_suite.py" in c]
+    assert call.endswith(expected), call
