@@ -73,22 +73,62 @@ def offset_route(route, distance: float, taper_m: float = 0.0) -> np.ndarray:
     """The polyline ``route`` [m, 2] shifted sideways by ``distance`` m (+: left of the direction
     of travel), as a route a building map draws off the centre-line: each corner moves along the
     bisector of its two segments' normals, as far as keeps both segments ``distance`` away (a
-    mitre, capped at 5x for near-reversals). ``taper_m`` > 0: the shift fades linearly to none
-    over the route's last ``taper_m`` m, so that it still ends on its goal (as the training
-    routes of mjx_stairs.env.routes do)."""
-    pts = _check_route(np.asarray(route, np.float64).reshape(-1, 2), "offset_route")
+    mitre, capped at 5x for near-reversals). Points on a straight stretch are dropped first, so
+    a corner is one mitre; on the inside of a turn, a segment shorter than the shift would run
+    backwards (a swallowtail: 2026-11-27, a centre-line of evenly spaced points shifted a third
+    of a U's width inside looped back 0.5 m at both landing corners), so it is dropped and its
+    neighbours meet where their shifted lines cross. ``taper_m`` > 0: the shift fades linearly
+    to none over the route's last ``taper_m`` m, so that it still ends on its goal (as the
+    training routes of mjx_stairs.env.routes do)."""
+    pts = _corners(_check_route(np.asarray(route, np.float64).reshape(-1, 2), "offset_route"))
+    seg = np.hypot(*np.diff(pts, axis=0).T)
+    to_end = np.r_[np.cumsum(seg[::-1])[::-1], 0.0]
+    if 0 < taper_m < to_end[0] and not np.isclose(to_end, taper_m).any():  # where the fade starts
+        i = int(np.searchsorted(-to_end, -taper_m))  # the first point nearer the end
+        a, b = pts[i - 1], pts[i]
+        pts = np.insert(pts, i, b + (a - b) * (taper_m - to_end[i]) / seg[i - 1], axis=0)
+        to_end = np.insert(to_end, i, taper_m)
     d = np.diff(pts, axis=0)
-    seg = np.hypot(*d.T)
-    d /= seg[:, None]
+    d /= np.hypot(*d.T)[:, None]
     n = np.stack([-d[:, 1], d[:, 0]], 1)  # the left normal of each segment
     before, after = np.concatenate([n[:1], n]), np.concatenate([n, n[-1:]])
     bis = before + after
     size = np.linalg.norm(bis, axis=1, keepdims=True)
     bis = np.where(size > 1e-9, bis / np.maximum(size, 1e-12), after)
     cos = np.maximum(np.einsum("ij,ij->i", bis, after), 0.2)
-    to_end = np.r_[np.cumsum(seg[::-1])[::-1], 0.0]
     fade = np.clip(to_end / taper_m, 0.0, 1.0) if taper_m > 0 else np.ones(len(pts))
-    return pts + bis * (distance * fade / cos)[:, None]
+    return _no_swallowtails(pts, pts + bis * (distance * fade / cos)[:, None])
+
+
+def _corners(pts: np.ndarray) -> np.ndarray:
+    """pts without the interior points where the polyline goes straight on."""
+    d = np.diff(pts, axis=0)
+    d /= np.hypot(*d.T)[:, None]
+    turn = np.abs(d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]) > 1e-9
+    back = np.einsum("ij,ij->i", d[:-1], d[1:]) < 0
+    return pts[np.r_[True, turn | back, True]]
+
+
+def _no_swallowtails(orig: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """off (orig's points shifted) without the segments that run against their original ones:
+    each goes, and its neighbours are extended to their crossing (an end segment: its inner
+    point goes)."""
+    orig, off = orig.copy(), off.copy()
+    while len(off) > 2:
+        back = np.einsum("ij,ij->i", np.diff(off, axis=0), np.diff(orig, axis=0)) <= 0
+        if not back.any():
+            break
+        j = int(np.argmax(back))  # segment j: off[j] -> off[j + 1]
+        if 0 < j < len(off) - 2:
+            p, r = off[j - 1], off[j] - off[j - 1]
+            q, s = off[j + 1], off[j + 2] - off[j + 1]
+            den = r[0] * s[1] - r[1] * s[0]
+            if abs(den) > 1e-12:
+                t = ((q - p)[0] * s[1] - (q - p)[1] * s[0]) / den
+                off[j] = p + t * r
+        k = j + 1 if j < len(off) - 2 else j  # the point that goes
+        off, orig = np.delete(off, k, axis=0), np.delete(orig, k, axis=0)
+    return off
 
 
 def route_line(route: np.ndarray, heights: np.ndarray, resolution: float) -> np.ndarray:

@@ -20,6 +20,8 @@ Steps, each writing JSON under OUT as soon as it is complete and skipped when it
          --suite of the exported cases, whose JSON carry the procedural route and spawn area
          (OUT/u3_case_<policy>.json). Files written by an earlier version with U level 3 only
          are kept (the step is skipped where the file exists).
+  offset only the mesh step's two offset-route cases for each of --mesh-policies:
+         OUT/u3_offset_<policy>.json (not in the default steps)
   alone  stage2_u on four code cases one at a time (OUT/code_alone_stage2_u.json), to compare
          with the same cases in code_stage2_u.json
   table  (no GPU) OUT/code_suite.md from the files present: success / falls per case and policy,
@@ -46,6 +48,7 @@ POLICIES = {  # the committed policies the README cites
     "generalist": RESULTS / "generalist/policy.npz",
     "generalist_line": RESULTS / "generalist_line/policy.npz",  # + 480 it with env.low_line_m
     "generalist_robot": RESULTS / "generalist_robot/policy.npz",  # implicit damping, head
+    "generalist_history": RESULTS / "generalist_history/policy.npz",  # + 3 steps of history
     "stage2_u_robot": RESULTS / "stage2_u_robot/policy.npz",
 }
 MESH_POLICIES = ("stage2_u", "stage2_u_lean")  # the default of --mesh-policies
@@ -179,6 +182,26 @@ def run_mesh(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
                                                          results=recs))
 
 
+def run_offset(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
+    """Only the mesh step's two offset-route cases (U level 3, the route shifted a third of the
+    width left and right) for each policy: OUT/u3_offset_<policy>.json (a quick re-measure,
+    e.g. after terrains.cases.offset_route's swallowtail fix of 2026-11-27)."""
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import cases
+
+    todo = {n: load_policy(POLICIES[n]) for n in names
+            if not (out / f"u3_offset_{n}.json").exists()}
+    if not todo:
+        return
+    t0 = time.time()
+    found = [c for c in mesh_routes(export_u3(out, spec.resolution), spec.resolution)
+             if c[0].startswith("u3_offset_")]
+    for name, recs in cases.success_by_case(todo, found, spec).items():
+        print(f"{name} eval --mesh u3, offset routes\n" + cases.case_table(recs), flush=True)
+        write(out / f"u3_offset_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                      results=recs))
+
+
 def write_table(out: Path) -> None:
     """Long: three markdown tables, each only from the files present."""
     from mjx_stairs.atomic import write_text
@@ -279,6 +302,7 @@ def main() -> None:
     for step, fn in (("suite", lambda: run_suite(a.out, names, spec)),
                      ("mesh", lambda: run_mesh(a.out, spec, mesh_names)),
                      ("alone", lambda: run_alone(a.out, spec)),
+                     ("offset", lambda: run_offset(a.out, spec, mesh_names)),
                      ("table", lambda: write_table(a.out))):
         if step in steps:
             fn()

@@ -504,8 +504,11 @@ run_step() {
     # the RQ1 policies beside stage2_u (whose re-evaluation is step fidelity's mjx_eval/): the
     # no-stall ablation and the paper's final goal with and without the stall penalty, into
     # $OUT/rq_eval
-    transfer-eval)
+    transfer-eval)  # resumes from the committed cells (transfer_lean/evaluation_exit/cells/)
       [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
+      mkdir -p "$OUT/transfer_lean_eval"
+      [ -d experiments/results/transfer_lean/evaluation_exit/cells ] && cp -rn \
+        experiments/results/transfer_lean/evaluation_exit/cells "$OUT/transfer_lean_eval/"
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix \
         --config experiments/results/transfer_lean/models.toml --robots 1000 \
         --out "$OUT/transfer_lean_eval" 2>&1 | grep -v warp ;;

@@ -61,15 +61,26 @@ def cut_corners(route: jnp.ndarray, span: jnp.ndarray, amount: jnp.ndarray) -> j
 
 def shift_sideways(route: jnp.ndarray, offset: jnp.ndarray) -> jnp.ndarray:
     """[K, 3] route moved ``offset`` m to its left (negative: right), fading out over the last
-    TAPER_M m."""
+    TAPER_M m. On the inside of a turn the points nearer the corner than the shift would come
+    out in a loop that runs backwards (2026-11-27: a U's centre-line shifted a third of its
+    width inside looped back ~0.5 m at both landing corners); a shifted point that lies closer
+    to the route than its shift is such a loop's, and takes the last good point before it, so
+    the route runs from there straight to the first good point after (about the corner's
+    mitre)."""
     cum = arc_lengths(route)
     k = route.shape[0]
     idx = jnp.arange(k)
     tangent = route[jnp.minimum(idx + 1, k - 1), :2] - route[jnp.maximum(idx - 1, 0), :2]
     tangent = tangent / jnp.maximum(jnp.linalg.norm(tangent, axis=-1, keepdims=True), 1e-6)
     left = jnp.stack([-tangent[:, 1], tangent[:, 0]], -1)
-    fade = jnp.clip((cum[-1] - cum) / TAPER_M, 0.0, 1.0)
-    return route.at[:, :2].add((offset * fade)[:, None] * left)
+    shift = offset * jnp.clip((cum[-1] - cum) / TAPER_M, 0.0, 1.0)
+    shifted = route.at[:, :2].add(shift[:, None] * left)
+    a, ab = route[:-1, :2], route[1:, :2] - route[:-1, :2]  # the route's segments
+    p = shifted[:, None, :2]
+    t = jnp.clip(jnp.sum((p - a) * ab, -1) / jnp.maximum(jnp.sum(ab * ab, -1), 1e-12), 0.0, 1.0)
+    near = jnp.min(jnp.linalg.norm(p - (a + t[..., None] * ab), axis=-1), axis=-1)  # [K]
+    good = (near >= 0.95 * jnp.abs(shift) - 1e-4).at[0].set(True)
+    return shifted[jax.lax.cummax(jnp.where(good, idx, 0))]
 
 
 def perturb(rng: jax.Array, line3: jnp.ndarray, cum: jnp.ndarray, width: jnp.ndarray,

@@ -138,6 +138,30 @@ def test_offset_route_keeps_every_segment_at_the_distance():
     assert np.allclose(offset_route(u, 0.5)[1], [3.5, 0.5])  # inside the turn: a mitre
     line = np.stack([np.linspace(0.0, 4.0, 9), np.zeros(9)], 1)
     tapered = offset_route(line, 0.6, taper_m=1.0)  # ends on the route's end, as in training
-    assert np.allclose(tapered[:, 1], [0.6] * 7 + [0.3, 0.0]) and np.allclose(tapered[-1], line[-1])
+    assert np.allclose(np.interp(line[:, 0], tapered[:, 0], tapered[:, 1]), [0.6] * 7 + [0.3, 0.0])
+    assert np.allclose(tapered[-1], line[-1])
     with pytest.raises(ValueError, match="at least 2"):
         offset_route([[1.0, 1.0]], 0.3)
+
+
+def test_offset_route_never_runs_backwards_inside_a_turn():
+    """The U-shaped test level 3 centre-line (64 evenly spaced points, the tile's) shifted a
+    third of its width to the inside of the turn, as code_suite's offset case: the shifted route
+    is the corners' mitre (no loop), each segment runs the way its original does, and every
+    point keeps the distance from the centre-line (the first run looped back 0.5 m at both
+    landing corners: its robots fell or timed out)."""
+    import terrains
+    from terrains.cases import offset_route
+
+    tile = terrains.make_tile("u_shaped", 2, "left", "test", 0.1)
+    line = tile.centreline[:, :2].astype(np.float64)
+    width = tile.spec["width"]
+    for side in (1.0, -1.0):
+        off = offset_route(line, side * width / 3)
+        corners = offset_route(line[[0, 24, 39, 63]], side * width / 3)  # start, corners, goal
+        assert np.allclose(off, corners, atol=1e-6), (off, corners)
+        assert len(off) == 4 and off[2, 1] > off[1, 1]  # across the landing, one way
+    # a swallowtail made and removed: a 0.4 m jog shifted 0.5 m into the turn
+    z = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 0.4], [0.0, 0.4]])
+    off = offset_route(z, 0.5)
+    assert len(off) == 3 and np.allclose(off, [[0.0, 0.5], [2.5, 0.5], [0.0, -0.1]])

@@ -76,6 +76,26 @@ def test_shifting_sideways_moves_left_and_fades_out_at_the_goal():
     np.testing.assert_allclose(right[far, 1], -0.3, atol=1e-5)
 
 
+def test_shifting_into_a_turn_never_runs_backwards():
+    """A U-turn's centre-line (two 90-degree corners, evenly spaced points) shifted 0.67 m into
+    the turn: no segment of the route runs against the centre-line (before the fix it looped
+    back 0.5 m at each corner), its corners sit within a point spacing of the mitre, and the
+    same shift to the outside is the plain pointwise shift."""
+    u = _polyline((0.0, 0.0), (4.0, 0.0), (4.0, 2.2), (0.0, 2.2))
+    spacing = 10.2 / ((K - 1) // 3)
+    inside = np.asarray(routes.shift_sideways(u, jnp.float32(0.67)))
+    heading = np.diff(np.asarray(u)[:, :2], axis=0)
+    step = np.diff(inside[:, :2], axis=0)
+    assert np.all(np.einsum("ij,ij->i", step, heading) >= -1e-6)  # never backwards
+    for corner in ([3.33, 0.67], [3.33, 1.53]):  # the mitres of the two corners
+        assert np.min(np.hypot(*(inside[:, :2] - corner).T)) < spacing
+    assert np.all(inside[:, 0] < 3.33 + 1e-4)  # nothing beyond the inner line of the landing
+    outside = np.asarray(routes.shift_sideways(u, jnp.float32(-0.67)))
+    line = np.asarray(u)
+    far = np.asarray(routes.arc_lengths(u)) < 10.2 - routes.TAPER_M
+    np.testing.assert_allclose(np.hypot(*(outside - line)[far, :2].T), 0.67, atol=1e-4)
+
+
 @pytest.fixture(scope="module")
 def u_tiles():
     atlas = terrains.build_atlas(["building"], levels=[3], variants_per_family=5,
