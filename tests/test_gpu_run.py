@@ -36,9 +36,11 @@ def test_gpu_groups_run_their_steps_pinned_with_their_variables(tmp_path):
     and the script waits for them before it ends."""
     env = {"PATH": "/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path),
            "HOME": str(tmp_path)}
-    run = subprocess.run(["bash", str(RUN), "60", "gpu0:SEED=7,gpus", "gpu1:gpus,no-such-step"],
+    run = subprocess.run(["bash", str(RUN), "60", "gpu0:SEED=7,gpus", "gpu1:gpus,no-such-step",
+                          "gpu2+3:gpus"],
                          env=env, capture_output=True, text=True, timeout=120, cwd=RUN.parents[2])
-    logs = {n: (tmp_path / "logs" / f"gpu{n}.log").read_text() for n in (0, 1)}
+    logs = {n: (tmp_path / "logs" / f"gpu{n}.log").read_text() for n in (0, 1, "2+3")}
+    assert "CUDA_VISIBLE_DEVICES=2,3 SEED=unset" in logs["2+3"], logs["2+3"]  # two GPUs
     assert "CUDA_VISIBLE_DEVICES=0 SEED=7" in logs[0], logs[0]
     assert "CUDA_VISIBLE_DEVICES=1 SEED=unset" in logs[1], logs[1]
     assert "unknown step no-such-step" in logs[1]

@@ -3,8 +3,9 @@
 # ../shared/gpu/wheelhouse.sh built into .whl, then run the named steps, writing under $OUT.
 #   bash experiments/gpu/run.sh DEADLINE_S STEP [STEP ...]
 # On a host of several GPUs a step argument gpuN:TOKEN,TOKEN,... runs its steps in turn on GPU N
-# alone, in the background beside the other arguments (a TOKEN KEY=VALUE sets a variable for the
-# group's later steps), e.g. gpu0:SEED=0,paper gpu1:SEED=1,paper pack: device time is counted
+# alone (gpuN+M:...: on GPUs N and M together), in the background beside the other arguments (a
+# TOKEN KEY=VALUE sets a variable for the group's later steps), e.g. gpu0:SEED=0,paper
+# gpu1:SEED=1,paper pack: device time is counted
 # per machine, so two GPUs train two runs for the price of one (gpus: what a group sees).
 # Steps (end with pack, since only 8 files come back), each reproducing a published result
 # (docs/results.md names the steps that produced each number; one-off exploratory steps are in
@@ -214,13 +215,16 @@ eval_names() {
 GPU_JOBS=()
 gpu_group() {  # gpuN:TOKEN,...: on GPU N alone (CUDA_VISIBLE_DEVICES=N), in the background beside
   # the other groups, each TOKEN in turn: KEY=VALUE sets a variable for the group's later steps
-  # (SEED=2, TRAIN_ARGS=...), anything else is a step. Its log: $OUT/logs/gpuN.log
-  local n=${1%%:*} tokens=${1#*:} count
+  # (SEED=2, TRAIN_ARGS=...), anything else is a step. Its log: $OUT/logs/gpuN.log. gpuN+M:...:
+  # on GPUs N and M together (a training splits its robots over them)
+  local n=${1%%:*} tokens=${1#*:} count g
   n=${n#gpu}; count=$(nvidia-smi -L 2>/dev/null | wc -l)
-  if [ "$count" -gt 0 ] && [ "$n" -ge "$count" ]; then echo "no GPU $n on this host ($count)"; return; fi
+  for g in ${n//+/ }; do
+    if [ "$count" -gt 0 ] && [ "$g" -ge "$count" ]; then echo "no GPU $g on this host ($count)"; return; fi
+  done
   mkdir -p "$OUT/logs"
   (
-    export CUDA_VISIBLE_DEVICES=$n
+    export CUDA_VISIBLE_DEVICES=${n//+/,}
     IFS=, read -ra toks <<< "$tokens"
     for t in "${toks[@]}"; do
       case $t in
