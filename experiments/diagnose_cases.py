@@ -97,7 +97,9 @@ def rollout(env, policy, state):
             "planar_speed": jnp.linalg.norm(d.qvel[:2]),
             "foot": foot, "foot_riser": foot_riser, "foot_wall": foot_wall, "knee": knee,
             "shin": shin, "trunk": trunk,
-            "wall": foot_wall | knee_wall | shin_wall | trunk_wall,
+            # per robot (the trunk group has a row per body, the head among them since
+            # robot.head_collision, so it is not the legs' 4)
+            "wall": (foot_wall.any() | knee_wall.any() | shin_wall.any() | trunk_wall.any())[None],
             "x": kin.pos[0], "y": kin.pos[1], "yaw": kin.yaw,
             "yaw_to_route": wrap_angle(target[3] - kin.yaw),
             "saturated": jnp.abs(d.ctrl) > 0.99 * torque_limit,
@@ -230,6 +232,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--env", nargs="*", default=[], help="env overrides KEY=VALUE")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--riser", type=float, default=0.17,
+                    help="m, for a case whose tile has no spec of its own (an imported mesh)")
+    ap.add_argument("--risers", type=int, default=20, help="the same, risers up to the top")
     ap.add_argument("--trace", type=int, default=0,
                     help="print the first N falling robots' last 2 s every 0.1 s")
     a = ap.parse_args()
@@ -253,7 +258,8 @@ def main() -> None:
     spawn_arc = np.asarray(jax.vmap(lambda p, t: rw.centreline_geometry(
         p[:2], env.tiles.line[t], env.tiles.line_cum[t])[1])(jnp.asarray(pos), state.info["tile"]))
     spawn_z = np.asarray(env.tiles.spawn)[rec["tile"], 2]
-    specs = [dict(t.spec) for _, t in cases]
+    # a mesh case's tile carries no riser: its exported JSON's spec does (--suite FOLDER)
+    specs = [{"riser": a.riser, "risers": a.risers, **t.spec} for _, t in cases]
     robots = robot_records(env, rec, wanted, specs, a.robots, spawn_arc, spawn_z)
     summaries = [case_summary(n, robots[i * a.robots:(i + 1) * a.robots])
                  for i, n in enumerate(wanted)]
