@@ -39,7 +39,13 @@ def trajectory(robots: int, steps: int, family: str = "pyramid",
     config = module.EnvConfig(episode_length_s=2.0)
     if overrides:
         from mjx_stairs.config import to_dict
-        from mjx_stairs.env.config import env_config_from
+        try:
+            from mjx_stairs.env.config import env_config_from
+        except ImportError:  # the flat layout before issue 20 (e.g. f894b78)
+            from mjx_stairs.config import apply_overrides, from_dict
+
+            def env_config_from(data, extra):
+                return from_dict(module.EnvConfig, apply_overrides(data, extra))
 
         config = env_config_from(to_dict(config), overrides)
     env = module.StairEnv(atlas, config)
@@ -84,8 +90,13 @@ def main() -> int:
     for k in now:
         equal = np.array_equal(now[k], then[k])
         same &= equal
-        print(f"  {k:10s} {'identical' if equal else 'DIFFERENT'}  max |diff| "
-              f"{np.abs(now[k] - then[k]).max():.3g}")
+        diff = np.abs(now[k] - then[k])
+        print(f"  {k:10s} {'identical' if equal else 'DIFFERENT'}  max |diff| {diff.max():.3g}")
+        if not equal and diff.ndim == 3:  # [step, robot, feature]: which features, how often
+            cols = np.nonzero(diff.max((0, 1)) > 1e-6)[0]
+            share = (diff > 1e-6).any(-1).mean()
+            print(f"    features {cols[:12].tolist()}{' ...' if len(cols) > 12 else ''} "
+                  f"({len(cols)} of {diff.shape[-1]}), in {100 * share:.1f} % of robot-steps")
     return 0 if same else 1
 
 
