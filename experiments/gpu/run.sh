@@ -30,8 +30,9 @@
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md), stage2-robot and
 # sim2sim-policy (issue 25: stage 2 for a real Go2's joints, a policy's sim-to-sim table with MJX
-# columns of the same starts), stage2-robot-corner, stage2-robot-history and delay-grid (issue 25:
-# the damping x delay corner, a policy on the whole grid in MuJoCo itself). Each training step stops and
+# columns of the same starts), stage2-robot-corner, stage2-robot-history, stage2-robot-latency20
+# and delay-grid (issue 25: the damping x delay corner, a policy on the whole grid in MuJoCo
+# itself). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
@@ -477,6 +478,9 @@ run_step() {
     # 0.1-2 x delay 0-20 ms in MuJoCo itself (U L5 up, 200 robots per cell), on the host's CPUs
     # in the background, into $OUT/delay_grid/<policy>/
     stage2-robot-corner) train stage2_u_robot_corner experiments/stage2_u_robot_corner.toml ;;
+    # issue 25: stage2_u_robot fine-tuned for a measured 15-20 ms latency over every damping
+    # (stage2_u_robot_latency20.toml); judge it with GRID_POLICY=stage2_u_robot_latency20 delay-grid
+    stage2-robot-latency20) train stage2_u_robot_latency20 experiments/stage2_u_robot_latency20.toml ;;
     # issue 25: stage2_u_robot with 3 steps of observation history (stage2_u_robot_history.toml);
     # judge it with GRID_POLICY=stage2_u_robot_history delay-grid
     stage2-robot-history) train stage2_u_robot_history experiments/stage2_u_robot_history.toml ;;

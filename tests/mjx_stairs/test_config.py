@@ -148,7 +148,8 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
     paper = "_paper" in path.name  # stage2_u_paper.toml and its family / no-stall files
     named = {"generalist.toml": "evaluation", "stage2_u_robot.toml": "evaluation",
              "stage2_u_robot_corner.toml": "evaluation",
-             "stage2_u_robot_history.toml": "evaluation", "generalist_history.toml": "evaluation"}
+             "stage2_u_robot_history.toml": "evaluation", "generalist_history.toml": "evaluation",
+             "stage2_u_robot_latency20.toml": "evaluation"}
     want = PHYSICS[named.get(path.name, "lean" if path.name.endswith("_lean.toml")
                              else "evaluation_top" if paper else "reference")]
     assert {k: getattr(cfg.env.robot, k) for k in want} == want
