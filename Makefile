@@ -67,8 +67,15 @@ exp1: $(SETUP)
 transfer-matrix: $(SETUP)
 	$(CPU_XLA) $(PY) -m mjx_stairs transfer-matrix $(ARGS)
 
+# issue 22: the lean training physics beside the evaluation physics (4096 robots, physics only
+# and full training), then the measured time to a trained climber as a row (a GPU job: minutes)
 bench: $(SETUP)
-	$(PY) -m mjx_stairs bench $(ARGS)
+	$(PY) -m mjx_stairs bench --config experiments/stage2_u_lean.toml --robots 4096 \
+	  --parts physics,train --out runs/bench/lean.json $(ARGS)
+	$(PY) -m mjx_stairs bench --config experiments/stage2_u.toml env.robot.physics=evaluation \
+	  --robots 4096 --parts physics,train --out runs/bench/evaluation.json $(ARGS)
+	$(PY) experiments/bench_table.py runs/bench/lean.json runs/bench/evaluation.json \
+	  --climber experiments/results/time_to_climber/time_to_climber.json
 
 time-to-climber: $(SETUP)  # issue 22: stage 1 + stage 2 from nothing (lean physics), timed, judged (GPU; CPU smoke: ARGS="--stage1-iterations 2 --stage2-iterations 2 --robots 4")
 	$(CPU_XLA) $(PY) experiments/gpu/time_to_climber.py runs/time_to_climber \
