@@ -32,7 +32,11 @@ RQ1_POLICIES = {n: f"experiments/results/{n}/policy.npz" for n in (
     "stage2_u_paper", "stage2_u_paper_s1", "stage2_u_paper_s2", "stage2_u_paper_no_stall_s0",
     "stage2_u_paper_no_stall_s1", "stage2_u_paper_no_stall_s2")}
 """Issue 21's paper-setting policies: for `gt --policies` (not in the fidelity table)."""
-KNOWN_POLICIES = {**POLICIES, **RQ1_POLICIES}
+OTHER_POLICIES = {  # for `gt --policies` (not in the fidelity table)
+    "time_to_climber": "experiments/results/time_to_climber/stage2/policy.npz",  # issue 22
+    "stage2_u_evaluation_exit_s0": "experiments/results/stage2_u_evaluation_exit_s0/policy.npz",
+}
+KNOWN_POLICIES = {**POLICIES, **RQ1_POLICIES, **OTHER_POLICIES}
 OPTIONS = {  # env overrides of each physics option
     "reference": ("robot.terrain_contacts=mjx", "robot.shin_collision=true",
                   "robot.ls_iterations=5"),
