@@ -13,7 +13,8 @@
 # are in git show b53571c:experiments/gpu/, e.g. session_eval4.sh): stage1, stage2, ablation,
 # stage2-final-goal, report (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean
 # (the lean physics and its check in the reference physics), straight-lean, l-shaped-lean,
-# spiral-lean, transfer-lean (Tables 1-2), generalist, generalist-history, eval-generalist,
+# spiral-lean, transfer-lean (Tables 1-2), generalist, generalist-history, generalist-lean,
+# generalist-lean-finish, eval-generalist,
 # bench-generalist (issue 24), time-to-climber (issue 22),
 # bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml), scaling (bench
 # --devices over the GPUs visible), two-processes (one process on two GPUs against two processes
@@ -295,6 +296,13 @@ run_step() {
     # physics); resumes from .carry/generalist/. bench-generalist: its physics-only rate at 4096
     # robots on its own atlas, for the training rate the run logs
     generalist) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist experiments/generalist.toml ;;
+    # the generalist in the lean physics (generalist_lean.toml, resumed from .carry/generalist_lean/),
+    # then generalist-lean-finish: the same run resumed in the evaluation physics (float32
+    # encoder) for the rest of its command (TRAIN_BUDGET_S to bound it)
+    generalist-lean) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_lean \
+        experiments/generalist_lean.toml ;;
+    generalist-lean-finish) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_lean \
+        experiments/generalist_lean.toml env.robot.physics=evaluation network.conv_impl=auto ;;
     generalist-history) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_history \
         experiments/generalist_history.toml ;;  # the same with 3 steps of observation history
     # the generalist (GEN_POLICY, else the one trained in this command, else carried) on the

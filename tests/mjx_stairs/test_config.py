@@ -154,7 +154,7 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
                              else "evaluation_top" if paper else "reference")]
     assert {k: getattr(cfg.env.robot, k) for k in want} == want
     # the bfloat16 encoder only where its stage-2 training was checked
-    bf16 = path.name == "stage2_u_lean.toml"
+    bf16 = path.name in ("stage2_u_lean.toml", "generalist_lean.toml")
     assert cfg.network.conv_impl == ("fused_bf16" if bf16 else "auto")
     assert experiment.load(path, [], cpu=True)[0].network.conv_impl == "auto"
 
