@@ -69,3 +69,39 @@ def test_code_suite_step_runs_every_step_asked_for(tmp_path, variables, expected
                    text=True, timeout=60, cwd=RUN.parents[2], check=True)
     (call,) = [c for c in calls.read_text().splitlines() if "code_suite.py" in c]
     assert call.endswith(expected), call
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+def test_wait_policy_waits_for_a_run_published_in_this_command(tmp_path):
+    """A group's wait-policy step returns once another group's run is published
+    (/tmp/policies/NAME.npz written after the command started), and gives up near the deadline
+    when none comes; a file from before the command does not count."""
+    import os
+    import time
+    import uuid
+
+    env = {"PATH": "/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
+           "HOME": str(tmp_path)}
+    name = f"test_wait_{uuid.uuid4().hex[:8]}"
+    f = Path("/tmp/policies") / f"{name}.npz"
+    f.parent.mkdir(exist_ok=True)
+    try:
+        f.write_bytes(b"old")
+        os.utime(f, (time.time() - 3600, time.time() - 3600))  # an earlier command's
+        run = subprocess.Popen(["bash", str(RUN), "120", f"gpu0:WAIT_POLICY={name},wait-policy"],
+                               env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, cwd=RUN.parents[2])
+        time.sleep(8)
+        assert run.poll() is None  # the old file did not count
+        f.write_bytes(b"new")
+        run.communicate(timeout=60)
+        log = (tmp_path / "out" / "logs" / "gpu0.log").read_text()
+        assert f"{f} is in" in log, log
+        late = subprocess.run(["bash", str(RUN), "64", "gpu0:WAIT_POLICY=no_such_run,wait-policy"],
+                              env=env, capture_output=True, text=True, timeout=60,
+                              cwd=RUN.parents[2])
+        assert late.returncode == 0
+        assert "no new /tmp/policies/no_such_run.npz in time" in (
+            tmp_path / "out" / "logs" / "gpu0.log").read_text()
+    finally:
+        f.unlink(missing_ok=True)

@@ -27,7 +27,8 @@
 # transfer-paper (RQ2 in the paper's setting), eval-names (named policies at 1000 robots), bench-options (issue 22: the speed of
 # physics between columns and the evaluation physics), stage2-physics, eval-physics (issue 22:
 # stage 2 trained in one physics option, judged in the evaluation physics), warp (MuJoCo Warp's
-# speed and success), gpus, pack; and on the host's CPUs beside the
+# speed and success), wait-policy (a group waits for a run another GPU trains), gpus, pack; and
+# on the host's CPUs beside the
 # GPU steps: ground-truth (issue 19: CPU MuJoCo on box stairs), sim2sim, sim2sim-damping01,
 # sim2sim-latency20 (issue 25: the sim-to-sim table of docs/deploy.md), stage2-robot and
 # sim2sim-policy (issue 25: stage 2 for a real Go2's joints, a policy's sim-to-sim table with MJX
@@ -608,6 +609,15 @@ run_step() {
         2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit"
       python3 experiments/gpu/warp_physics.py success "$OUT/warp/success.json" --robots 1000 \
         --cells "${WARP_CELLS:-8,9,15,16,3,5}" 2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit" ;;
+    wait-policy)  # WAIT_POLICY=NAME: wait (until 60 s before the deadline) for run NAME, trained
+      # on another GPU in this command, to publish: /tmp/policies/NAME.npz written after this
+      # command started (an older one from an earlier command on the warm machine does not count)
+      f=/tmp/policies/${WAIT_POLICY:?WAIT_POLICY names a run}.npz
+      while ! { [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; } && [ "$(left)" -gt 60 ]; do
+        sleep 5
+      done
+      if [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; then sleep 2; echo "== $f is in"
+      else echo "no new $f in time"; fi ;;
     gpus)  # what this step sees: its GPU(s) and seed (a check of gpuN: groups)
       echo "CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-unset} SEED=${SEED:-unset}"
       nvidia-smi -L 2>/dev/null || true ;;
