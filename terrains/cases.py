@@ -113,7 +113,7 @@ def _no_swallowtails(orig: np.ndarray, off: np.ndarray) -> np.ndarray:
     """off (orig's points shifted) without the segments that run against their original ones:
     each goes, and its neighbours are extended to their crossing (an end segment: its inner
     point goes)."""
-    orig, off = orig.copy(), off.copy()
+    off = off.copy()  # its crossing points are written in place
     while len(off) > 2:
         back = np.einsum("ij,ij->i", np.diff(off, axis=0), np.diff(orig, axis=0)) <= 0
         if not back.any():

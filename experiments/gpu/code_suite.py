@@ -150,7 +150,7 @@ def mesh_routes(folder: Path, resolution: float) -> list:
 
 def run_mesh(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
     """The family (evaluate.success_by_cell: the starts of eval --family), the meshes and the
-    cases, each one program for every policy."""
+    cases, each one program per evaluation env (cases.by_env: a history policy needs its own)."""
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study import cases, evaluate
 
@@ -164,22 +164,15 @@ def run_mesh(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
                                  episode_length_s=spec.episode_length_s, seed=spec.seed,
                                  resolution=spec.resolution, physics=spec.physics,
                                  env_overrides=spec.env_overrides)
-        for name, r in evaluate.success_by_cell(todo, cell).items():
-            print(f"{name} eval --family u_shaped --levels 3: {100 * r['success'][0]:.1f} %")
-            write(out / f"u3_family_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
-                                                         result=r))
-    found = {"mesh": lambda: mesh_routes(folder, spec.resolution),
-             "case": lambda: cases.suite_cases(str(folder), spec.resolution)}
-    for kind, make in found.items():
-        todo = {n: p for n, p in policies.items() if not (out / f"u3_{kind}_{n}.json").exists()}
-        if not todo:
-            continue
-        t0 = time.time()
-        for name, recs in cases.success_by_case(todo, make(), spec).items():
-            print(f"{name} eval --{'mesh' if kind == 'mesh' else 'suite'} u3\n"
-                  + cases.case_table(recs), flush=True)
-            write(out / f"u3_{kind}_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
-                                                         results=recs))
+        for group in cases.by_env(todo, cell):
+            for name, r in evaluate.success_by_cell(group, cell).items():
+                print(f"{name} eval --family u_shaped --levels 3: {100 * r['success'][0]:.1f} %")
+                write(out / f"u3_family_{name}.json",
+                      facts(spec, t0, policy=str(POLICIES[name]), result=r))
+    run_cases(out, "mesh", "eval --mesh u3", policies, lambda: mesh_routes(folder, spec.resolution),
+              spec)
+    run_cases(out, "case", "eval --suite u3", policies,
+              lambda: cases.suite_cases(str(folder), spec.resolution), spec)
 
 
 def run_offset(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
@@ -187,20 +180,27 @@ def run_offset(out: Path, spec, names: tuple[str, ...] = MESH_POLICIES) -> None:
     width left and right) for each policy: OUT/u3_offset_<policy>.json (a quick re-measure,
     e.g. after terrains.cases.offset_route's swallowtail fix of 2026-11-27)."""
     from mjx_stairs.rl.policy import load_policy
+
+    run_cases(out, "offset", "eval --mesh u3, offset routes",
+              {n: load_policy(POLICIES[n]) for n in names},
+              lambda: [c for c in mesh_routes(export_u3(out, spec.resolution), spec.resolution)
+                       if c[0].startswith("u3_offset_")], spec)
+
+
+def run_cases(out: Path, kind: str, label: str, policies: dict, make, spec) -> None:
+    """The cases `make()` for each policy without its OUT/u3_<kind>_<policy>.json yet, one
+    program per evaluation env (cases.by_env), each policy's records written there."""
     from mjx_stairs.study import cases
 
-    todo = {n: load_policy(POLICIES[n]) for n in names
-            if not (out / f"u3_offset_{n}.json").exists()}
+    todo = {n: p for n, p in policies.items() if not (out / f"u3_{kind}_{n}.json").exists()}
     if not todo:
         return
-    t0 = time.time()
-    found = [c for c in mesh_routes(export_u3(out, spec.resolution), spec.resolution)
-             if c[0].startswith("u3_offset_")]
-    for name, policy in todo.items():  # one at a time: a history policy needs its own env
-        recs = cases.success_by_case({name: policy}, found, spec)[name]
-        print(f"{name} eval --mesh u3, offset routes\n" + cases.case_table(recs), flush=True)
-        write(out / f"u3_offset_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
-                                                      results=recs))
+    t0, found = time.time(), make()
+    for group in cases.by_env(todo, spec):
+        for name, recs in cases.success_by_case(group, found, spec).items():
+            print(f"{name} {label}\n" + cases.case_table(recs), flush=True)
+            write(out / f"u3_{kind}_{name}.json", facts(spec, t0, policy=str(POLICIES[name]),
+                                                         results=recs))
 
 
 def write_table(out: Path) -> None:

@@ -613,11 +613,9 @@ run_step() {
       # on another GPU in this command, to publish: /tmp/policies/NAME.npz written after this
       # command started (an older one from an earlier command on the warm machine does not count)
       f=/tmp/policies/${WAIT_POLICY:?WAIT_POLICY names a run}.npz
-      while ! { [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; } && [ "$(left)" -gt 60 ]; do
-        sleep 5
-      done
-      if [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; then sleep 2; echo "== $f is in"
-      else echo "no new $f in time"; fi ;;
+      fresh() { [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; }
+      while ! fresh && [ "$(left)" -gt 60 ]; do sleep 5; done
+      if fresh; then sleep 2; echo "== $f is in"; else echo "no new $f in time"; fi ;;
     gpus)  # what this step sees: its GPU(s) and seed (a check of gpuN: groups)
       echo "CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-unset} SEED=${SEED:-unset}"
       nvidia-smi -L 2>/dev/null || true ;;
