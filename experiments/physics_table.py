@@ -2,7 +2,7 @@
 each judged in the evaluation physics on the U-shaped and straight `extended` levels and the
 `code` suite (1000 robots per cell), beside the one trained in the evaluation physics itself.
 
-  python experiments/physics_table.py [--baseline stage2_u_evaluation_exit_s0] [--out FILE]
+  python experiments/physics_table.py [--baseline RUN [RUN ...]] [--out FILE]
 
 Reads experiments/results/physics_eval/<run>/ (run.sh step eval-physics: u_shaped/, straight/,
 code.json) for the runs trained with run.sh step stage2-physics, and, for the two stage-2
@@ -11,7 +11,8 @@ iterations from the same stage-1 policy), the same cells from their evaluation-p
 re-judging: ground_truth/mjx_evaluation_exit/ (the `extended` levels) and
 code_suite/evaluation_exit/ (the code suite, 30 s episodes). The training rate is the run's
 median env steps/s (run.json). Writes physics_eval/table.md: per run the success per cell, the
-largest gap to the baseline and the cells within 2 points.
+largest gap to each baseline (by default the two seeds trained in the evaluation physics) and,
+with several baselines, to their per-cell mean, and the cells within 2 points of each.
 """
 
 from __future__ import annotations
@@ -28,8 +29,11 @@ PUBLISHED = {  # run -> (training physics, where its evaluation-physics cells ar
 }
 TRAINED = {
     "stage2_u_evaluation_exit_s0": "evaluation (columns, 8 Newton / 10 ls)",
+    "stage2_u_evaluation_exit_s1": "evaluation (columns, 8 Newton / 10 ls), seed 1",
     "stage2_u_columns_n4_s0": "columns_n4 (columns, 4 Newton / 8 ls)",
+    "stage2_u_lean_s1": "lean (nearest-point, no shins, ls 3), seed 1",
 }
+BASELINES = ["stage2_u_evaluation_exit_s0", "stage2_u_evaluation_exit_s1"]
 
 
 def _cells(run: str) -> dict[str, float]:
@@ -59,36 +63,46 @@ def _rate(run: str) -> str:
     return f"{facts['steps_per_s_median'] / 1e3:.0f} k"
 
 
+def _row(label: str, c: dict[str, float], bases: dict[str, dict[str, float]]) -> str:
+    """A summary row: the cells' means and, per baseline, their largest signed gap to the
+    baseline's cells and how many lie within 2 points of them."""
+    ext = [v for n, v in c.items() if " ext " in n]
+    code = [v for n, v in c.items() if " ext " not in n]
+    out = f"{label} | {sum(ext) / len(ext):.1f} | {sum(code) / len(code):.1f}"
+    for base in bases.values():
+        gaps = [c[n] - base[n] for n in base]
+        within = sum(abs(g) <= 2.0 for g in gaps)
+        out += f" | {max(gaps, key=abs):+.1f} | {within} of {len(gaps)}"
+    return out + " |"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--baseline", default="stage2_u_evaluation_exit_s0")
+    ap.add_argument("--baseline", nargs="+", default=BASELINES)
     ap.add_argument("--out", type=Path, default=R / "physics_eval/table.md")
     args = ap.parse_args(argv)
     runs = {**TRAINED, **PUBLISHED}
     cells = {r: _cells(r) for r in runs}
-    base = cells[args.baseline]
-    names = list(base)
+    bases = {f"`{b}`": cells[b] for b in args.baseline}
+    names = list(cells[args.baseline[0]])
+    if len(bases) > 1:
+        bases["their mean"] = {n: sum(b[n] for b in bases.values()) / len(bases) for n in names}
     lines = ["# Stage 2 trained one physics option at a time, judged in the evaluation physics",
-             "", f"Baseline: `{args.baseline}`. Success in % of 1000 robots per cell (U and "
+             "", f"Baselines: {', '.join(bases)}. Success in % of 1000 robots per cell (U and "
              "straight `extended` levels, 20 s; the `code` suite, 30 s), H100, evaluation "
              "physics. Written by `python experiments/physics_table.py`.", "",
-             "| run | training physics | train env steps/s | mean ext | mean code | largest gap "
-             "to baseline | cells within 2 |", "|---|---|---|---|---|---|---|"]
-    for run, phys in runs.items():
-        c = cells[run]
-        ext = [c[n] for n in names if " ext " in n]
-        code = [c[n] for n in names if " ext " not in n]
-        gaps = [c[n] - base[n] for n in names]
-        worst = max(gaps, key=abs)
-        within = sum(abs(g) <= 2.0 for g in gaps)
-        lines.append(f"| `{run}` | {phys} | {_rate(run)} | {sum(ext) / len(ext):.1f} | "
-                     f"{sum(code) / len(code):.1f} | {worst:+.1f} | {within} of {len(gaps)} |")
+             "| run | training physics | train env steps/s | mean ext | mean code | "
+             + " | ".join(f"largest gap to {b} | cells within 2" for b in bases) + " |",
+             "|---|---|---|---|---|" + "---|---|" * len(bases)]
+    lines += [_row(f"| `{r}` | {phys} | {_rate(r)}", cells[r], bases) for r, phys in runs.items()]
+    if "their mean" in bases:  # the baselines' per-cell mean as a row of its own
+        lines.append(_row("| their mean (baselines) | | ", bases["their mean"], bases))
     lines += ["", "| cell | " + " | ".join(f"`{r}`" for r in runs) + " |",
               "|---|" + "---|" * len(runs)]
     lines += [f"| {n} | " + " | ".join(f"{cells[r][n]:.1f}" for r in runs) + " |"
               for n in names]
     args.out.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines[:6 + len(runs)]))
+    print("\n".join(lines[:lines.index("", 4)]))
     return 0
 
 

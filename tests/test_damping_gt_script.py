@@ -8,6 +8,8 @@ import pytest
 
 from mjx_stairs.env.config import env_config_from
 
+EVAL = "robot.physics=evaluation"
+
 ROOT = Path(__file__).resolve().parents[1]
 spec = importlib.util.spec_from_file_location("damping_gt", ROOT / "experiments/damping_gt.py")
 damping_gt = importlib.util.module_from_spec(spec)
@@ -20,7 +22,9 @@ def test_a_config_names_damping_integration_and_delay():
     assert damping_gt.overrides("d0.5i_l15") == ("robot.joint_damping=0.5",
                                                  "robot.implicit_damping=true",
                                                  "robot.action_delay_s=0.015")
-    robot = env_config_from(None, damping_gt.overrides("d0.5i_l15")).robot
+    # applied after the evaluation physics (eval_env), whose 8 Newton iterations implicit damping
+    # needs (sim.robot.IMPLICIT_MIN_ITERATIONS)
+    robot = env_config_from(None, (EVAL, *damping_gt.overrides("d0.5i_l15"))).robot
     assert (robot.joint_damping, robot.implicit_damping) == (0.5, True)
     assert robot.action_delay_s == pytest.approx(0.015)
 
@@ -28,7 +32,7 @@ def test_a_config_names_damping_integration_and_delay():
 def test_the_grid_is_damping_by_delay_and_every_cell_is_a_valid_env():
     assert len(damping_gt.GRID) == len(set(damping_gt.GRID)) == 20
     assert damping_gt.GRID[0] == "d0.1i" and damping_gt.GRID[-1] == "d2i_l20"
-    delays = {env_config_from(None, damping_gt.overrides(c)).robot.action_delay_s
+    delays = {env_config_from(None, (EVAL, *damping_gt.overrides(c))).robot.action_delay_s
               for c in damping_gt.GRID}
     assert sorted(round(d, 3) for d in delays) == [0.0, 0.005, 0.01, 0.015, 0.02]
 

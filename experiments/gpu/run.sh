@@ -79,11 +79,14 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   python3 - "$OUT/$name/metrics.jsonl" <<'PY'
 import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
+def g(r, k):  # a NaN is logged as null: show it as nan, not as a crash
+    v = r.get(k, 0)
+    return float("nan") if v is None else v
 for r in rows[:: max(1, len(rows) // 12)] + rows[-1:]:
     print(f"it {r['iteration']:5d} steps {r['env_steps']/1e6:7.1f}M  {r['perf/steps_per_s']/1e3:6.0f}k/s "
-          f"ret {r.get('episode/return', 0):7.2f} level {r.get('level', 0):5.2f} "
-          f"top {r.get('at_top', 0):.2f} succ {r.get('success', 0):.3f} "
-          f"term {r.get('terminated', 0):.4f} lr {r.get('opt/lr', 0):.1e}")
+          f"ret {g(r, 'episode/return'):7.2f} level {g(r, 'level'):5.2f} "
+          f"top {g(r, 'at_top'):.2f} succ {g(r, 'success'):.3f} "
+          f"term {g(r, 'terminated'):.4f} nan_reset {g(r, 'nan_reset'):.4f} lr {g(r, 'opt/lr'):.1e}")
 PY
 }
 

@@ -192,6 +192,12 @@ class EnvConfig:
              f"at most one policy step ({step:g} s)"),
             ("robot.action_delay_s", fixed, 0.0 <= fixed <= step + 1e-9,
              f"in [0, one policy step ({step:g} s)]"),
+            ("robot.implicit_damping", self.robot.implicit_damping,
+             not self.robot.implicit_damping
+             or self.robot.solver_iterations >= rb.IMPLICIT_MIN_ITERATIONS,
+             f"false unless env.robot.solver_iterations >= {rb.IMPLICIT_MIN_ITERATIONS} (it has "
+             f"{self.robot.solver_iterations}: the joints run away, sim.robot."
+             "IMPLICIT_MIN_ITERATIONS; physics 'lean_implicit' is lean with 4)"),
             ("route.perturb_prob", self.route.perturb_prob,
              self.route.perturb_prob == 0 or self.goal_mode == "waypoint",
              "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)"),

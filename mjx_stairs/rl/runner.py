@@ -21,6 +21,7 @@ only process 0 logs and writes files. The run directory,
 from __future__ import annotations
 
 import json
+import math
 import signal
 import time
 import warnings
@@ -41,6 +42,10 @@ from mjx_stairs.rl.trainer import (
     compiled_chunk,
     start_from_policy,
 )
+
+
+class TrainingDiverged(ValueError):
+    """The PPO update went non-finite: the run stopped without saving the diverged state."""
 
 
 class RunResult(NamedTuple):
@@ -135,16 +140,40 @@ def run(
                           "wall_time": time.time() - t_start, "perf/chunk_s": chunk_s,
                           "perf/steps_per_s": K * steps_per_iter / chunk_s,
                           "perf/compile_s": compile_s, **metrics}
-                log.log(record)
+                log.log(record)  # a diverged chunk's row too: the curve shows where
+                if bad := _non_finite(record):
+                    asked = f"diverged ({bad})"  # the loop stops; this state is not saved
+                    continue
                 saver.after_chunk(state)
                 if on_chunk is not None and on_chunk(record):
                     asked = "on_chunk"
-            saver.finish(state, iteration)
+            if not stop.startswith("diverged"):
+                saver.finish(state, iteration)
     finally:
         log.close()
+    if stop.startswith("diverged"):
+        raise _diverged(stop, iteration, record, run_dir)
     _say(f"stopped ({stop}) at iteration {iteration}, {iteration * steps_per_iter:,} env steps; "
          f"run dir {run_dir}")
     return RunResult(run_dir, state, record, stop)
+
+
+def _diverged(stop: str, iteration: int, record: dict[str, Any], run_dir: Path) -> TrainingDiverged:
+    last = checkpoint.latest_checkpoint(run_dir / "checkpoints")
+    return TrainingDiverged(
+        f"training {stop} in the chunk ending at iteration {iteration} "
+        f"(nan_reset {record.get('nan_reset', float('nan')):.3g} of robot-steps); nothing of "
+        f"it was saved, the newest checkpoint is {last or 'none'}")
+
+
+def _non_finite(record: dict[str, Any]) -> str:
+    """The PPO losses and gradient norm of a chunk's record that are not finite ("" if none):
+    a NaN there has already reached the parameters (a physics blow-up's rewards do it: the
+    generalist in the lean physics with implicit damping, 2026-11-27, trained 1790 iterations of
+    NaN before this check)."""
+    bad = [f"{k} is {v}" for k, v in record.items()
+           if (k.startswith("loss/") or k == "opt/grad_norm") and not math.isfinite(v)]
+    return ", ".join(bad)
 
 
 def _stop_reason(tc, iteration: int, target: int, t_start: float, chunk_s: float,

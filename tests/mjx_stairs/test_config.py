@@ -149,7 +149,8 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
     named = {"generalist.toml": "evaluation", "stage2_u_robot.toml": "evaluation",
              "stage2_u_robot_corner.toml": "evaluation",
              "stage2_u_robot_history.toml": "evaluation", "generalist_history.toml": "evaluation",
-             "stage2_u_robot_latency20.toml": "evaluation"}
+             "stage2_u_robot_latency20.toml": "evaluation",
+             "generalist_lean.toml": "lean_implicit"}
     want = PHYSICS[named.get(path.name, "lean" if path.name.endswith("_lean.toml")
                              else "evaluation_top" if paper else "reference")]
     assert {k: getattr(cfg.env.robot, k) for k in want} == want
@@ -157,6 +158,28 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
     bf16 = path.name in ("stage2_u_lean.toml", "generalist_lean.toml")
     assert cfg.network.conv_impl == ("fused_bf16" if bf16 else "auto")
     assert experiment.load(path, [], cpu=True)[0].network.conv_impl == "auto"
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 3, 8])
+def test_implicit_damping_needs_newton_iterations(iterations):
+    """MJX's implicit damping takes the step from the constraint force, so an unconverged solve
+    runs the joints away (sim.robot.IMPLICIT_MIN_ITERATIONS): refused below 3 iterations."""
+    from mjx_stairs.env.config import env_config_from
+    from mjx_stairs.study import experiment
+
+    over = ["robot.implicit_damping=true", f"robot.solver_iterations={iterations}"]
+    if iterations >= 3:
+        assert env_config_from(None, over).robot.solver_iterations == iterations
+    else:
+        with pytest.raises(ConfigError, match=r"'env\.robot\.implicit_damping': must be false "
+                           rf"unless env\.robot\.solver_iterations >= 3 \(it has {iterations}:"):
+            env_config_from(None, over)
+        # explicit damping keeps the reference and lean physics' single iteration
+        assert env_config_from(None, over[1:]).robot.solver_iterations == iterations
+    if iterations == 1:  # the generalist's implicit damping in the plain lean physics
+        with pytest.raises(ConfigError, match="implicit_damping"):
+            experiment.load("experiments/generalist_lean.toml", ["env.robot.physics=lean"],
+                            cpu=False)
 
 
 def test_a_file_inherits_from_its_base(tmp_path):

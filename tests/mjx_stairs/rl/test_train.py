@@ -237,6 +237,28 @@ def test_stops_on_env_steps_and_time_budget(tmp_path):
     assert checkpoint.latest_checkpoint(r.run_dir / "checkpoints").name == "state_00000006.npz"
 
 
+class BlowsUp(PointReach):
+    """The toy task whose reward goes NaN from the third step of an episode, as a physics
+    blow-up's rewards do."""
+
+    def step(self, state, action):
+        out = super().step(state, action)
+        t = state.info["phys"]["t"]
+        return out.replace(reward=jax.numpy.where(t >= 2, jax.numpy.nan, out.reward))
+
+
+def test_a_non_finite_update_stops_the_run_and_saves_nothing_of_it(tmp_path):
+    with pytest.raises(runner.TrainingDiverged,
+                       match=r"training diverged \(loss/.* is nan.*\) in the chunk ending at "
+                             r"iteration 2 .*the newest checkpoint is none"):
+        runner.run(_run_cfg(tmp_path), BlowsUp())
+    run_dir = next((tmp_path / "runs").iterdir())
+    assert not list((run_dir / "checkpoints").glob("state_*.npz"))
+    assert not (run_dir / "policy.npz").exists()
+    rows = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [2] and rows[0]["loss/total"] is None
+
+
 # ----------------------------------------------------------------------------- devices
 
 
