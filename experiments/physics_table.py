@@ -76,6 +76,23 @@ def _row(label: str, c: dict[str, float], bases: dict[str, dict[str, float]]) ->
     return out + " |"
 
 
+def _spread_rows(cells: dict[str, dict[str, float]], seeds: list[str]) -> list[str]:
+    """Per run, its cells inside the seeds' per-cell range widened by 2 points, and how many lie
+    below or above it: with seeds that differ by tens of points on half the cells, a gap beyond
+    their own spread is what two seeds can show (docs/results.md 5c)."""
+    names = list(cells[seeds[0]])
+    lo = {n: min(cells[b][n] for b in seeds) - 2.0 for n in names}
+    hi = {n: max(cells[b][n] for b in seeds) + 2.0 for n in names}
+    rows = ["", f"Cells inside the range of {', '.join(f'`{b}`' for b in seeds)} widened by 2 "
+            "points:", "", "| run | inside | below | above |", "|---|---|---|---|"]
+    for run, c in cells.items():
+        below = [n for n in names if c[n] < lo[n]]
+        above = [n for n in names if c[n] > hi[n]]
+        rows.append(f"| `{run}` | {len(names) - len(below) - len(above)} of {len(names)} | "
+                    f"{len(below)} | {len(above)} |")
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--baseline", nargs="+", default=BASELINES)
@@ -97,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     lines += [_row(f"| `{r}` | {phys} | {_rate(r)}", cells[r], bases) for r, phys in runs.items()]
     if "their mean" in bases:  # the baselines' per-cell mean as a row of its own
         lines.append(_row("| their mean (baselines) | | ", bases["their mean"], bases))
+        lines += _spread_rows(cells, args.baseline)
     lines += ["", "| cell | " + " | ".join(f"`{r}`" for r in runs) + " |",
               "|---|" + "---|" * len(runs)]
     lines += [f"| {n} | " + " | ".join(f"{cells[r][n]:.1f}" for r in runs) + " |"

@@ -1,0 +1,31 @@
+"""experiments/gpu/code_suite.py's table: the offset step's re-measure is what the U level 3 row
+shows, not the mesh step's older offset cases."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+spec = importlib.util.spec_from_file_location("code_suite", ROOT / "experiments/gpu/code_suite.py")
+code_suite = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(code_suite)
+
+
+def _cases(path: Path, **success: float) -> None:
+    path.write_text(json.dumps({"results": [{"name": k, "success": v, "fell": 1 - v}
+                                            for k, v in success.items()]}))
+
+
+def test_the_offset_columns_come_from_the_offset_step_where_it_ran(tmp_path):
+    for name in ("a", "b"):
+        (tmp_path / f"u3_family_{name}.json").write_text(
+            json.dumps({"result": {"success": [0.99]}}))
+        _cases(tmp_path / f"u3_mesh_{name}.json", u3=0.98, u3_offset_left=0.10,
+               u3_offset_right=0.90)
+    _cases(tmp_path / "u3_offset_b.json", u3_offset_left=0.784, u3_offset_right=0.968)
+    rows = {line.split("|")[1].strip(): line for line in code_suite.mesh_table(tmp_path, {})
+            if line.startswith("| a ") or line.startswith("| b ")}
+    assert rows["a"] == "| a | 99.0 | 98.0 | - | 10.0 | 90.0 |"  # mesh step's, no re-measure
+    assert rows["b"] == "| b | 99.0 | 98.0 | - | 78.4 | 96.8 |"
