@@ -47,6 +47,9 @@ T0=$(date +%s)
 DEADLINE=$1; shift
 if [ -z "${SKIP_INSTALL:-}" ]; then  # SKIP_INSTALL=1: the packages are already importable;
   # WHL=.whl_slim: another wheelhouse folder (one without the CUDA wheels the host has)
+  # (.whl_min, 21 MB: .whl_slim plus glfw and pyopengl, which `import mujoco` loads; enough for
+  # training, eval and the CPU MuJoCo steps but sim2sim's onnxruntime: with the tracked tree at
+  # ~34 MB it fits the 64 MiB a call carries, where the 34 MB .whl_train no longer does)
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target /tmp/site ${WHL:-.whl}/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
 fi
