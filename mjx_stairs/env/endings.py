@@ -74,11 +74,36 @@ def endings(c: EnvConfig, kin: Kinematics, q: rw.Quantities, info: dict, finite:
                    terminated, truncated, terminated | truncated)
 
 
-def metric_names(reward_terms: tuple[str, ...], both_ways: bool = False) -> tuple[str, ...]:
+FAMILY_RATIOS = ("level", "at_top", "success")
+"""Per family of an atlas of several, as `<ratio>/<family>#num` and `#den` (the trainer logs
+num / den as `<ratio>/<family>`): the mean level and the share at the top level of the family's
+robot-steps, and the success of its episodes that ended. The logged `level` mixes families whose
+top levels differ (the paper families end at 12-15 cm risers, the building family at 21 cm)."""
+
+
+def metric_names(reward_terms: tuple[str, ...], both_ways: bool = False,
+                 families: tuple[str, ...] = ()) -> tuple[str, ...]:
     """The keys of `state.metrics`: `reward/<term>` per active term, then STEP_METRICS (then
-    DOWN_METRICS on an atlas walked both ways)."""
+    DOWN_METRICS on an atlas walked both ways, then FAMILY_RATIOS' keys for `families` when
+    there are several)."""
+    per_family = tuple(f"{r}/{f}#{part}" for f in families for r in FAMILY_RATIOS
+                       for part in ("num", "den")) if len(families) > 1 else ()
     return (tuple(f"reward/{k}" for k in reward_terms) + STEP_METRICS
-            + (DOWN_METRICS if both_ways else ()))
+            + (DOWN_METRICS if both_ways else ()) + per_family)
+
+
+def family_metrics(families: tuple[str, ...], family: jnp.ndarray, level: jnp.ndarray,
+                   top_level: int, e: Endings) -> dict[str, jnp.ndarray]:
+    """{FAMILY_RATIOS' `#num` / `#den` keys: []} of this step for a robot of family index
+    `family` at `level` (before the auto-reset)."""
+    done, out = e.done.astype(jnp.float32), {}
+    for i, name in enumerate(families):
+        mine = (family == i).astype(jnp.float32)
+        for ratio, num, den in (("level", level * mine, mine),
+                                ("at_top", (level == top_level) * mine, mine),
+                                ("success", e.success * done * mine, done * mine)):
+            out[f"{ratio}/{name}#num"], out[f"{ratio}/{name}#den"] = num, den
+    return out
 
 
 def down_metrics(e: Endings, down: jnp.ndarray) -> dict[str, jnp.ndarray]:

@@ -203,9 +203,14 @@ def reduce_chunk_metrics(per_iter: dict[str, jax.Array]) -> dict[str, jax.Array]
     """[K] per-iteration metrics -> chunk scalars: means; episode stats pooled; lr = last."""
     out = {}
     for k, v in per_iter.items():
-        if k.startswith("_ep/"):
+        if k.startswith("_ep/") or k.endswith(("#num", "#den")):
             continue
         out[k] = jnp.mean(v)
+    for k in per_iter:  # an env's ratio metric X#num over X#den: X (nan where X#den is 0)
+        if k.endswith("#num") and k[:-4] + "#den" in per_iter:
+            den = jnp.sum(per_iter[k[:-4] + "#den"])
+            out[k[:-4]] = jnp.where(den > 0, jnp.sum(per_iter[k]) / jnp.maximum(den, 1e-9),
+                                    jnp.nan)
     out["opt/lr"] = per_iter["opt/lr"][-1]
     count = jnp.sum(per_iter["_ep/count"])
     out["episode/count"] = count

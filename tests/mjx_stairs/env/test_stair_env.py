@@ -386,3 +386,20 @@ def test_bad_goal_mode_is_a_one_line_error(u_atlas):
         from_dict(EnvConfig, {"goal_mode": "carrot"}, prefix="env")
     with pytest.raises(ValueError, match="env.waypoint_lookahead_m"):
         StairEnv(u_atlas, EnvConfig(goal_mode="waypoint", waypoint_lookahead_m=0.0))
+
+
+def test_per_family_metrics_split_level_top_and_success_by_family():
+    from mjx_stairs.env import endings
+
+    names = endings.metric_names(("dist",), False, ("building", "u_shaped"))
+    assert "level/building#num" in names and "success/u_shaped#den" in names
+    assert not any("#" in n for n in endings.metric_names(("dist",), False, ("u_shaped",)))
+    family, level = jnp.asarray([0, 0, 1, 1]), jnp.asarray([9, 2, 9, 9])
+    done, success = jnp.asarray([1, 0, 1, 1], bool), jnp.asarray([1.0, 0.0, 0.0, 1.0])
+    e = endings.Endings(success, *([jnp.zeros(4)] * 7), jnp.zeros(4, bool), done)
+    m = jax.vmap(lambda f, lv, ee: endings.family_metrics(("building", "u_shaped"), f, lv, 9,
+                                                          ee))(family, level, e)
+    ratio = {k[:-4]: float(m[k].sum() / m[k[:-4] + "#den"].sum())
+             for k in m if k.endswith("#num")}
+    assert ratio == {"level/building": 5.5, "at_top/building": 0.5, "success/building": 1.0,
+                     "level/u_shaped": 9.0, "at_top/u_shaped": 1.0, "success/u_shaped": 0.5}

@@ -14,6 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -304,3 +305,19 @@ def test_two_host_devices_match_one():
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "OK max param diff" in proc.stdout
 
+
+
+def test_chunk_metrics_pool_an_envs_ratio_metrics():
+    """`X#num` over `X#den` (env.endings.family_metrics' per-family level, top share and
+    success) is logged as X, pooled over the chunk's iterations like success; nan where X#den is
+    0; the raw parts are not logged."""
+    per_iter = {"opt/lr": jnp.asarray([1e-3, 2e-3]), "_ep/count": jnp.asarray([1.0, 1.0]),
+                "_ep/return_sum": jnp.asarray([2.0, 4.0]), "_ep/length_sum": jnp.ones(2),
+                "episode/terminations": jnp.zeros(2), "episode/truncations": jnp.zeros(2),
+                "level": jnp.asarray([3.0, 3.0]),
+                "level/a#num": jnp.asarray([0.5, 1.5]), "level/a#den": jnp.asarray([0.25, 0.25]),
+                "level/b#num": jnp.zeros(2), "level/b#den": jnp.zeros(2)}
+    out = {k: float(v) for k, v in train_lib.reduce_chunk_metrics(per_iter).items()}
+    assert out["level/a"] == pytest.approx(4.0) and np.isnan(out["level/b"])
+    assert out["level"] == 3.0 and out["episode/return"] == 3.0
+    assert not any("#" in k for k in out)

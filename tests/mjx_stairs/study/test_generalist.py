@@ -149,6 +149,14 @@ def test_the_generalist_trains_a_few_iterations(trained):
     assert [r["iteration"] for r in rows] == [1, 2] and rows[-1]["env_steps"] == 2 * 8 * 8
     for key in ("episode/return", "loss/value", "level", "reward/centreline", "success_down"):
         assert math.isfinite(rows[-1][key]), key
+    # the level per family (env.endings.FAMILY_RATIOS): a robot-step mean in [0, 9] where the
+    # family had robots, null where it had none; the num / den parts are not logged
+    families = ("building", "straight", "l_shaped", "u_shaped", "spiral")
+    levels = [rows[-1][f"level/{f}"] for f in families]
+    assert any(v is not None for v in levels)
+    assert all(v is None or 0 <= v <= 9 for v in levels), levels
+    assert all(f"{r}/{f}" in rows[-1] for r in ("at_top", "success") for f in families)
+    assert not any("#" in k for k in rows[-1])
     saved = load_policy(trained / "policy.npz").metadata["config"]
     assert saved["terrain"]["directions"] == ["up", "down"]
     assert saved["env"]["randomization"]["joint_damping"] == [0.1, 2.0]
