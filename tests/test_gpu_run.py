@@ -105,3 +105,24 @@ def test_wait_policy_waits_for_a_run_published_in_this_command(tmp_path):
             tmp_path / "out" / "logs" / "gpu0.log").read_text()
     finally:
         f.unlink(missing_ok=True)
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+def test_a_failed_training_is_reported_and_the_next_steps_run(tmp_path):
+    """A training that exits non-zero (a config error, a diverged update) is said in one line,
+    nothing is copied from it, and the command goes on. python3 is a stand-in whose `-m
+    mjx_stairs train` fails."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "python3").write_text(
+        '#!/bin/sh\ncase "$*" in *"mjx_stairs train"*) echo "mjx-stairs train: error: '
+        'training diverged" >&2; exit 2;; esac\nexit 0\n')
+    (bin_dir / "python3").chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
+           "HOME": str(tmp_path)}
+    run = subprocess.run(["bash", str(RUN), "200", "stage1", "gpus"], env=env,
+                         capture_output=True, text=True, timeout=60, cwd=RUN.parents[2])
+    assert "training diverged" in run.stdout
+    assert "== stage1: train failed (2); nothing published, no state copied" in run.stdout
+    assert "cp:" not in run.stdout + run.stderr and "Traceback" not in run.stdout
+    assert "== gpus done" in run.stdout

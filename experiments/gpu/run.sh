@@ -72,6 +72,10 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   python3 -m mjx_stairs train "$toml" train.log_dir=/tmp/runs train.progress=false \
     train.console=false train.checkpoint_env=packed train.time_budget_s=$budget \
     publish_dir="$OUT/$name" ${TRAIN_ARGS:-} "$@" "${resume[@]}" 2>&1 | grep -v -e "warp" -e "^$"
+  local rc=${PIPESTATUS[0]}
+  if [ "$rc" != 0 ]; then  # e.g. a config error, or the trainer stopping on a diverged update
+    echo "== $name: train failed ($rc); nothing published, no state copied"; return 0
+  fi
   local run; run=$(ls -td /tmp/runs/${name}__* | head -1)
   cp "$(ls "$run"/checkpoints/state_*.npz | tail -1)" "$OUT/$name/state.npz"
   mkdir -p /tmp/policies && cp "$OUT/$name/policy.npz" "/tmp/policies/$name.npz"  # for report
