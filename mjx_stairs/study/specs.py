@@ -36,7 +36,8 @@ class EvalSpec:
     physics: str = field(
         default=EVAL_PHYSICS,
         metadata={"help": "physics preset to evaluate in: evaluation (default), evaluation_top "
-                  "(as published to 2026-11-24), reference, lean, or trained (the policy's own)"})
+                  "(as published to 2026-11-24), reference, lean, lean_implicit, or trained (the "
+                  "policy's own)"})
     env_overrides: tuple[str, ...] = field(
         default=(),
         metadata={"flag": "--env", "metavar": "KEY=VALUE",
