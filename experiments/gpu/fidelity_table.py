@@ -27,15 +27,12 @@ def interval(p: float, n: int) -> float:
     return 100 * 1.96 * math.sqrt(max(p * (1 - p), 1e-4) / n)
 
 
-MJX_ROBOTS = 1000
-
-
 def gap_interval(g: float, n: int, s: float, m: int) -> float:
     """Half-width of the unpaired 95 % interval of the difference of two success rates (g over
     n episodes, s over m), in points, Agresti-Caffo (one success and one failure added to each
     sample, so that 200 of 200 is not read as certain). The ground truth runs the MJX
-    evaluation's own starts, but per-robot outcomes are not kept, so the paired (tighter) test
-    cannot be made from the files."""
+    evaluation's own starts, but its files keep rates, not per-robot outcomes, so the paired
+    (tighter) test cannot be made from them."""
     var = 0.0
     for rate, k in ((g, n), (s, m)):
         q = (rate * k + 1) / (k + 2)
@@ -88,7 +85,7 @@ def main(root: Path, before: bool = False) -> None:
                 if g is not None:
                     worst[o] = (worst[o][0], worst[o][1] + 1)
                     within[o] += abs(s - g) <= 0.03 + 1e-9
-                    beyond[o] += abs(s - g) > gap_interval(g, n, s, MJX_ROBOTS) / 100
+                    beyond[o] += abs(s - g) > gap_interval(g, n, s, recs["robots_per_cell"]) / 100
             se = "" if g is None else f" ±{interval(g, n):.1f}"
             gs = "–" if g is None else f"{100 * g:.1f}{se} ({n})"
             name = f"{c['family']} {c['schedule']} L{c['level']}"

@@ -225,6 +225,15 @@ eval_names() {
   done
 }
 
+wait_policy() {  # wait_policy NAME: wait (until 60 s before the deadline) for run NAME, trained
+  # on another GPU in this command, to publish: /tmp/policies/NAME.npz written after this command
+  # started (an older one from an earlier command on the warm machine does not count)
+  local f=/tmp/policies/$1.npz
+  fresh() { [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; }
+  while ! fresh && [ "$(left)" -gt 60 ]; do sleep 5; done
+  if fresh; then sleep 2; echo "== $f is in"; else echo "no new $f in time"; fi
+}
+
 GPU_JOBS=()
 gpu_group() {  # gpuN:TOKEN,...: on GPU N alone (CUDA_VISIBLE_DEVICES=N), in the background beside
   # the other groups, each TOKEN in turn: KEY=VALUE sets a variable for the group's later steps
@@ -566,10 +575,7 @@ run_step() {
       fam=${step%-paper}; fam=${fam//-/_}
       train "${fam}_paper" "experiments/${fam}_paper.toml" ;;
     transfer-paper)
-      if [ -n "${TP_WAIT:-}" ]; then  # a run trained on another GPU of this command
-        while [ ! -f "/tmp/policies/$TP_WAIT.npz" ] && [ "$(left)" -gt 60 ]; do sleep 5; done
-        sleep 2  # train copies the file there
-      fi
+      [ -n "${TP_WAIT:-}" ] && wait_policy "$TP_WAIT"  # a run trained on another GPU here
       models=/tmp/transfer_paper.$BASHPID.toml; paper_models "$models"  # one per GPU group
       part=()  # TP_ROWS / TP_COLUMNS (a+b): only those cells (one GPU's part of the matrix)
       [ -n "${TP_ROWS:-}" ] && part+=(--rows ${TP_ROWS//+/ })
@@ -619,13 +625,7 @@ run_step() {
         2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit"
       python3 experiments/gpu/warp_physics.py success "$OUT/warp/success.json" --robots 1000 \
         --cells "${WARP_CELLS:-8,9,15,16,3,5}" 2>&1 | grep -v -e "^Module" -e "took" -e "overflow" -e "iterations limit" ;;
-    wait-policy)  # WAIT_POLICY=NAME: wait (until 60 s before the deadline) for run NAME, trained
-      # on another GPU in this command, to publish: /tmp/policies/NAME.npz written after this
-      # command started (an older one from an earlier command on the warm machine does not count)
-      f=/tmp/policies/${WAIT_POLICY:?WAIT_POLICY names a run}.npz
-      fresh() { [ -f "$f" ] && [ "$(stat -c %Y "$f")" -ge "$T0" ]; }
-      while ! fresh && [ "$(left)" -gt 60 ]; do sleep 5; done
-      if fresh; then sleep 2; echo "== $f is in"; else echo "no new $f in time"; fi ;;
+    wait-policy) wait_policy "${WAIT_POLICY:?WAIT_POLICY names a run}" ;;  # see wait_policy
     gpus)  # what this step sees: its GPU(s) and seed (a check of gpuN: groups)
       echo "CUDA_VISIBLE_DEVICES=${CUDA_VISIBLE_DEVICES:-unset} SEED=${SEED:-unset}"
       nvidia-smi -L 2>/dev/null || true ;;

@@ -95,9 +95,9 @@ def metric_names(reward_terms: tuple[str, ...], both_ways: bool = False,
 def family_metrics(families: tuple[str, ...], family: jnp.ndarray, level: jnp.ndarray,
                    top_level: int, e: Endings) -> dict[str, jnp.ndarray]:
     """{FAMILY_RATIOS' `#num` / `#den` keys: []} of this step for a robot of family index
-    `family` at `level` (before the auto-reset)."""
+    `family` at `level` (before the auto-reset); none for an atlas of one family (metric_names)."""
     done, out = e.done.astype(jnp.float32), {}
-    for i, name in enumerate(families):
+    for i, name in enumerate(families if len(families) > 1 else ()):
         mine = (family == i).astype(jnp.float32)
         for ratio, num, den in (("level", level * mine, mine),
                                 ("at_top", (level == top_level) * mine, mine),

@@ -240,9 +240,8 @@ class StairEnv(Env):
                                   q.planar_goal_distance, moved_up)
         if self.both_ways:
             metrics.update(endings.down_metrics(ends, self.tiles.down[tile]))
-        if len(self.families) > 1:
-            metrics.update(endings.family_metrics(self.families, info["family"], level,
-                                                  self.num_levels - 1, ends))
+        metrics.update(endings.family_metrics(self.families, info["family"], level,
+                                              self.num_levels - 1, ends))
         f32 = lambda x: x.astype(jnp.float32)  # noqa: E731  (also when the physics is float64)
         return State(data, obs, f32(reward), f32(ends.done), jax.tree.map(f32, metrics), info)
 

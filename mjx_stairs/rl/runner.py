@@ -147,11 +147,11 @@ def run(
                 saver.after_chunk(state)
                 if on_chunk is not None and on_chunk(record):
                     asked = "on_chunk"
-            if not stop.startswith("diverged"):
+            if not (diverged := stop.startswith("diverged")):
                 saver.finish(state, iteration)
     finally:
         log.close()
-    if stop.startswith("diverged"):
+    if diverged:
         raise _diverged(stop, iteration, record, run_dir)
     _say(f"stopped ({stop}) at iteration {iteration}, {iteration * steps_per_iter:,} env steps; "
          f"run dir {run_dir}")
