@@ -14,7 +14,7 @@
 # stage2-final-goal, report (EXP1: Figure 2, RQ1, Figure 4), stage1-lean, stage2-lean, eval-lean
 # (the lean physics and its check in the reference physics), straight-lean, l-shaped-lean,
 # spiral-lean, transfer-lean (Tables 1-2), generalist, generalist-history, generalist-lean,
-# generalist-lean-finish, eval-generalist,
+# generalist-lean-finish, train-toml, eval-generalist,
 # bench-generalist (issue 24), time-to-climber (issue 22),
 # bench (make bench: the reference physics), bench-lean (stage2_u_lean.toml), scaling (bench
 # --devices over the GPUs visible), two-processes (one process on two GPUs against two processes
@@ -325,6 +325,10 @@ run_step() {
         experiments/generalist_lean.toml env.robot.physics=evaluation network.conv_impl=auto ;;
     generalist-history) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_history \
         experiments/generalist_history.toml ;;  # the same with 3 steps of observation history
+    # any experiment file whose train.experiment is its file name (TRAIN_TOML=experiments/X.toml,
+    # resumed from .carry/X/), e.g. the generalist's variants generalist_std05, generalist_noent
+    train-toml) n=$(basename "${TRAIN_TOML:?TRAIN_TOML names an experiment file}" .toml)
+      TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train "$n" "$TRAIN_TOML" ;;
     # the generalist (GEN_POLICY, else the one trained in this command, else carried) on the
     # paper's test levels of the four families, 1000 robots per level, up then down
     # (GEN_DIRECTIONS), each cut at the deadline

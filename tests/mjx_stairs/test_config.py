@@ -150,7 +150,8 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
              "stage2_u_robot_corner.toml": "evaluation",
              "stage2_u_robot_history.toml": "evaluation", "generalist_history.toml": "evaluation",
              "stage2_u_robot_latency20.toml": "evaluation",
-             "generalist_lean.toml": "lean_implicit"}
+             "generalist_lean.toml": "lean_implicit", "generalist_std05.toml": "evaluation",
+             "generalist_noent.toml": "evaluation"}
     want = PHYSICS[named.get(path.name, "lean" if path.name.endswith("_lean.toml")
                              else "evaluation_top" if paper else "reference")]
     assert {k: getattr(cfg.env.robot, k) for k in want} == want
