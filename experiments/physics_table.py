@@ -32,6 +32,8 @@ TRAINED = {
     "stage2_u_evaluation_exit_s1": "evaluation (columns, 8 Newton / 10 ls), seed 1",
     "stage2_u_columns_n4_s0": "columns_n4 (columns, 4 Newton / 8 ls)",
     "stage2_u_lean_s1": "lean (nearest-point, no shins, ls 3), seed 1",
+    "stage2_u_nearest_full_s0": "nearest_full (nearest-point, shins, 1 Newton / ls 5)",
+    "stage2_u_nearest_full_s1": "nearest_full (nearest-point, shins, 1 Newton / ls 5), seed 1",
 }
 BASELINES = ["stage2_u_evaluation_exit_s0", "stage2_u_evaluation_exit_s1"]
 

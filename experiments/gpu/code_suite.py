@@ -50,6 +50,8 @@ POLICIES = {  # the committed policies the README cites
     "generalist_robot": RESULTS / "generalist_robot/policy.npz",  # implicit damping, head
     "generalist_history": RESULTS / "generalist_history/policy.npz",  # + 3 steps of history
     "stage2_u_robot": RESULTS / "stage2_u_robot/policy.npz",
+    "generalist_noent": RESULTS / "generalist_noent/policy.npz",  # no entropy bonus
+    "generalist_std05": RESULTS / "generalist_std05/policy.npz",  # std bound 0.5
 }
 MESH_POLICIES = ("stage2_u", "stage2_u_lean")  # the default of --mesh-policies
 CODE_EXPORTS = ("code_commercial_u_left_up", "code_commercial_u_left_down")
