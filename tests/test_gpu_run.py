@@ -126,3 +126,41 @@ def test_a_failed_training_is_reported_and_the_next_steps_run(tmp_path):
     assert "== stage1: train failed (2); nothing published, no state copied" in run.stdout
     assert "cp:" not in run.stdout + run.stderr and "Traceback" not in run.stdout
     assert "== gpus done" in run.stdout
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+def test_a_training_step_run_again_resumes_from_what_it_kept(tmp_path):
+    """On a warm machine the same training step in the next command resumes from the state the
+    first one kept, and its curve holds both commands' rows; FRESH=1 starts over. python3 is a
+    stand-in trainer that writes a state, a policy and one metrics row per call."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "python3").write_text(
+        '#!/bin/sh\ncase "$*" in *"mjx_stairs train"*)\n'
+        '  echo "ARGS $*"\n'
+        '  pub=$(echo "$*" | sed -n "s/.*publish_dir=\\([^ ]*\\).*/\\1/p")\n'
+        '  n=$(ls -d "$RUNS"/stage1__* 2>/dev/null | wc -l)\n'
+        '  mkdir -p "$pub" "$RUNS/stage1__$n/checkpoints"\n'
+        '  echo "state $n" > "$RUNS/stage1__$n/checkpoints/state_1.npz"\n'
+        '  echo policy > "$pub/policy.npz"\n'
+        '  echo "{\\"row\\": $n}" > "$pub/metrics.jsonl";;\nesac\nexit 0\n')
+    (bin_dir / "python3").chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "HOME": str(tmp_path),
+           "RUNS": str(tmp_path / "runs"), "KEEP": str(tmp_path / "keep")}
+
+    def command(i, **extra):
+        out = tmp_path / f"out{i}"
+        run = subprocess.run(["bash", str(RUN), "200", "stage1"], env={**env, **extra,
+                             "OUT": str(out)}, capture_output=True, text=True, timeout=60,
+                             cwd=RUN.parents[2])
+        return run.stdout, out / "stage1"
+
+    first, out1 = command(1)
+    assert "--resume" not in first
+    assert (tmp_path / "keep" / "stage1" / "state.npz").read_text() == "state 0\n"
+    second, out2 = command(2)
+    assert f"--resume {tmp_path}/keep/stage1/state.npz" in second
+    assert (out2 / "metrics.jsonl").read_text().split() == ['{"row":', '0}', '{"row":', '1}']
+    assert (tmp_path / "keep" / "stage1" / "state.npz").read_text() == "state 1\n"
+    third, _ = command(3, FRESH="1")
+    assert "--resume" not in third

@@ -37,8 +37,9 @@
 # itself). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
-# the next command, copy that state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and
-# carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
+# the next command on the same warm machine, run the same step again: it resumes from the state
+# and whole curve it left in $KEEP/<name>/ (FRESH=1 starts over); on a fresh machine, copy that
+# state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
 # stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command. The CPU
 # steps start a background job and return at once; pack (or the end of the script) waits for them
 # until 10 s before the deadline and copies what they wrote to $OUT/<name>/.
@@ -59,7 +60,13 @@ left() { echo $(( DEADLINE - ($(date +%s) - T0) )); }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
 python3 -c "import jax, mujoco; print('jax', jax.__version__, jax.devices(), 'mujoco', mujoco.__version__)"
 
-train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz when carried
+# Where the trainings log (RUNS) and where each keeps its newest state and whole curve for the
+# next command on the same warm machine (KEEP; a fresh machine starts empty)
+RUNS=${RUNS:-/tmp/runs}
+KEEP=${KEEP:-/tmp/keep}
+
+train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz when carried,
+  # else from $KEEP/NAME/ (what an earlier command on this machine left; FRESH=1: start over)
   local name=$1 toml=$2; shift 2
   # TRAIN_BUDGET_S: less, to leave time for later steps. The margin covers what runs outside the
   # trainer's budget (atlas build, publish, ONNX export, the state copy): 25 s, 60 s for a large
@@ -67,22 +74,25 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   local budget=$(( $(left) - ${TRAIN_MARGIN_S:-25} ))
   [ -n "${TRAIN_BUDGET_S:-}" ] && [ "$TRAIN_BUDGET_S" -lt "$budget" ] && budget=$TRAIN_BUDGET_S
   local resume=() prev=".carry/$name"
+  [ -f "$prev/state.npz" ] || prev="$KEEP/$name"
+  [ -n "${FRESH:-}" ] && prev=/nonexistent
   [ -f "$prev/state.npz" ] && resume=(--resume "$prev/state.npz")
   echo "== $name: budget ${budget}s ${resume[*]}"
-  python3 -m mjx_stairs train "$toml" train.log_dir=/tmp/runs train.progress=false \
+  python3 -m mjx_stairs train "$toml" train.log_dir="$RUNS" train.progress=false \
     train.console=false train.checkpoint_env=packed train.time_budget_s=$budget \
     publish_dir="$OUT/$name" ${TRAIN_ARGS:-} "$@" "${resume[@]}" 2>&1 | grep -v -e "warp" -e "^$"
   local rc=${PIPESTATUS[0]}
   if [ "$rc" != 0 ]; then  # e.g. a config error, or the trainer stopping on a diverged update
     echo "== $name: train failed ($rc); nothing published, no state copied"; return 0
   fi
-  local run; run=$(ls -td /tmp/runs/${name}__* | head -1)
+  local run; run=$(ls -td "$RUNS"/${name}__* | head -1)
   cp "$(ls "$run"/checkpoints/state_*.npz | tail -1)" "$OUT/$name/state.npz"
   mkdir -p /tmp/policies && cp "$OUT/$name/policy.npz" "/tmp/policies/$name.npz"  # for report
   if [ -f "$prev/metrics.jsonl" ]; then  # keep the whole curve across commands
     cat "$prev/metrics.jsonl" "$OUT/$name/metrics.jsonl" > "$OUT/$name/m.tmp" \
       && mv "$OUT/$name/m.tmp" "$OUT/$name/metrics.jsonl"
   fi
+  mkdir -p "$KEEP/$name" && cp "$OUT/$name/state.npz" "$OUT/$name/metrics.jsonl" "$KEEP/$name/"
   python3 - "$OUT/$name/metrics.jsonl" <<'PY'
 import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
