@@ -39,8 +39,9 @@
 # policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
 # the next command on the same warm machine, run the same step again: it resumes from the state
 # and whole curve it left in $KEEP/<name>/ (FRESH=1 starts over); on a fresh machine, copy that
-# state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl. Stage 2 starts from experiments/results/stage1/policy.npz: commit the
-# stage-1 policy there first. TRAIN_ARGS (key=value ...) is added to every training command. The CPU
+# state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl.
+# Stage 2 starts from experiments/results/stage1/policy.npz: commit the stage-1 policy there
+# first. TRAIN_ARGS (key=value ...) is added to every training command. The CPU
 # steps start a background job and return at once; pack (or the end of the script) waits for them
 # until 10 s before the deadline and copies what they wrote to $OUT/<name>/.
 set -uo pipefail
@@ -336,7 +337,7 @@ run_step() {
     generalist-history) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_history \
         experiments/generalist_history.toml ;;  # the same with 3 steps of observation history
     # any experiment file whose train.experiment is its file name (TRAIN_TOML=experiments/X.toml,
-    # resumed from .carry/X/), e.g. the generalist's variants generalist_std05, generalist_noent
+    # resumed as every training is), e.g. the generalist's variants generalist_std05, generalist_noent
     train-toml) n=$(basename "${TRAIN_TOML:?TRAIN_TOML names an experiment file}" .toml)
       TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train "$n" "$TRAIN_TOML" ;;
     # the generalist (GEN_POLICY, else the one trained in this command, else carried) on the
