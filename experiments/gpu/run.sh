@@ -74,10 +74,11 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   # atlas (generalist: its state missed a 570 s command's pack by ~20 s at 25, 2026-11-27)
   local budget=$(( $(left) - ${TRAIN_MARGIN_S:-25} ))
   [ -n "${TRAIN_BUDGET_S:-}" ] && [ "$TRAIN_BUDGET_S" -lt "$budget" ] && budget=$TRAIN_BUDGET_S
-  local resume=() prev=".carry/$name"
-  [ -f "$prev/state.npz" ] || prev="$KEEP/$name"
-  [ -n "${FRESH:-}" ] && prev=/nonexistent
-  [ -f "$prev/state.npz" ] && resume=(--resume "$prev/state.npz")
+  local resume=() prev=""  # where the run goes on from: carried, else kept here, else nowhere
+  [ -z "${FRESH:-}" ] && for prev in ".carry/$name" "$KEEP/$name" ""; do
+    [ -f "$prev/state.npz" ] && break
+  done
+  [ -n "$prev" ] && resume=(--resume "$prev/state.npz")
   echo "== $name: budget ${budget}s ${resume[*]}"
   python3 -m mjx_stairs train "$toml" train.log_dir="$RUNS" train.progress=false \
     train.console=false train.checkpoint_env=packed train.time_budget_s=$budget \
@@ -89,7 +90,7 @@ train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz 
   local run; run=$(ls -td "$RUNS"/${name}__* | head -1)
   cp "$(ls "$run"/checkpoints/state_*.npz | tail -1)" "$OUT/$name/state.npz"
   mkdir -p /tmp/policies && cp "$OUT/$name/policy.npz" "/tmp/policies/$name.npz"  # for report
-  if [ -f "$prev/metrics.jsonl" ]; then  # keep the whole curve across commands
+  if [ -n "$prev" ] && [ -f "$prev/metrics.jsonl" ]; then  # the whole curve across commands
     cat "$prev/metrics.jsonl" "$OUT/$name/metrics.jsonl" > "$OUT/$name/m.tmp" \
       && mv "$OUT/$name/m.tmp" "$OUT/$name/metrics.jsonl"
   fi
@@ -326,7 +327,8 @@ run_step() {
     # issue 24: the generalist (experiments/generalist.toml, from the stage-1 policy, evaluation
     # physics); resumes from .carry/generalist/. bench-generalist: its physics-only rate at 4096
     # robots on its own atlas, for the training rate the run logs
-    generalist) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist experiments/generalist.toml ;;
+    # (generalist-history: the same with 3 steps of observation history)
+    generalist|generalist-history) TRAIN_TOML=experiments/${step//-/_}.toml run_step train-toml ;;
     # the generalist in the lean physics (generalist_lean.toml, resumed from .carry/generalist_lean/),
     # then generalist-lean-finish: the same run resumed in the evaluation physics (float32
     # encoder) for the rest of its command (TRAIN_BUDGET_S to bound it)
@@ -334,8 +336,6 @@ run_step() {
         experiments/generalist_lean.toml ;;
     generalist-lean-finish) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_lean \
         experiments/generalist_lean.toml env.robot.physics=evaluation network.conv_impl=auto ;;
-    generalist-history) TRAIN_MARGIN_S=${TRAIN_MARGIN_S:-60} train generalist_history \
-        experiments/generalist_history.toml ;;  # the same with 3 steps of observation history
     # any experiment file whose train.experiment is its file name (TRAIN_TOML=experiments/X.toml,
     # resumed as every training is), e.g. the generalist's variants generalist_std05, generalist_noent
     train-toml) n=$(basename "${TRAIN_TOML:?TRAIN_TOML names an experiment file}" .toml)
