@@ -66,16 +66,18 @@ python3 -c "import jax, mujoco; print('jax', jax.__version__, jax.devices(), 'mu
 RUNS=${RUNS:-/tmp/runs}
 KEEP=${KEEP:-/tmp/keep}
 
-train() {  # train NAME TOML [overrides...]; resumes from .carry/NAME/state.npz when carried,
-  # else from $KEEP/NAME/ (what an earlier command on this machine left; FRESH=1: start over)
+train() {  # train NAME TOML [overrides...]; resumes from $KEEP/NAME/ (what an earlier command on
+  # this machine left), else from .carry/NAME/state.npz when carried (FRESH=1: start over). The
+  # kept state first: a carried .carry stays on a warm machine after the command that carried it,
+  # and would take the run back to where it started
   local name=$1 toml=$2; shift 2
   # TRAIN_BUDGET_S: less, to leave time for later steps. The margin covers what runs outside the
   # trainer's budget (atlas build, publish, ONNX export, the state copy): 25 s, 60 s for a large
   # atlas (generalist: its state missed a 570 s command's pack by ~20 s at 25, 2026-11-27)
   local budget=$(( $(left) - ${TRAIN_MARGIN_S:-25} ))
   [ -n "${TRAIN_BUDGET_S:-}" ] && [ "$TRAIN_BUDGET_S" -lt "$budget" ] && budget=$TRAIN_BUDGET_S
-  local resume=() prev=""  # where the run goes on from: carried, else kept here, else nowhere
-  [ -z "${FRESH:-}" ] && for prev in ".carry/$name" "$KEEP/$name" ""; do
+  local resume=() prev=""  # where the run goes on from: kept here, else carried, else nowhere
+  [ -z "${FRESH:-}" ] && for prev in "$KEEP/$name" ".carry/$name" ""; do
     [ -f "$prev/state.npz" ] && break
   done
   [ -n "$prev" ] && resume=(--resume "$prev/state.npz")
@@ -225,15 +227,18 @@ paper_models() {  # paper_models FILE: the [models] of the paper-setting transfe
 
 # an evaluation of named policies (EVAL_NAMES a+b: trained here, carried, else committed) on
 # EVAL_FAMILIES (a+b, default u_shaped), EVAL_DIRECTION (up), 1000 robots, the evaluation
-# physics, into $OUT/eval/<name>[_<direction>]/
+# physics, into $OUT/eval/<name>[_<direction>][_<EVAL_TAG>]/; EVAL_ENV (a+b of key=value under
+# [env], e.g. robot.joint_damping=2.0+robot.implicit_damping=true) changes the robot judged
 eval_names() {
-  local name p
+  local name p env=()
+  [ -n "${EVAL_ENV:-}" ] && env=(--env ${EVAL_ENV//+/ })
   for name in ${EVAL_NAMES//+/ }; do
     p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
     [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
     timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
-      --family ${EVAL_FAMILIES//+/ } --direction "${EVAL_DIRECTION:-up}" \
-      --out "$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}" 2>&1 | grep -v warp
+      --family ${EVAL_FAMILIES//+/ } --direction "${EVAL_DIRECTION:-up}" "${env[@]}" \
+      --out "$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}" 2>&1 \
+      | grep -v warp
   done
 }
 
