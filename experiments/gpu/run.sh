@@ -51,7 +51,10 @@ if [ -z "${SKIP_INSTALL:-}" ]; then  # SKIP_INSTALL=1: the packages are already 
   # WHL=.whl_slim: another wheelhouse folder (one without the CUDA wheels the host has)
   # (.whl_min, 21 MB: .whl_slim plus glfw and pyopengl, which `import mujoco` loads; enough for
   # training, eval and the CPU MuJoCo steps but sim2sim's onnxruntime: with the tracked tree at
-  # ~34 MB it fits the 64 MiB a call carries, where the 34 MB .whl_train no longer does)
+  # ~34 MB it fits the 64 MiB a call carries, where the 34 MB .whl_train no longer does;
+  # .whl_lean, 18.5 MB: .whl_min without pyopengl and glfw, which `import mujoco` only tries
+  # (training, eval and the code suite ran without them, 2026-11-27), for a call that carries a
+  # state too: with the tree at ~41 MB, .whl_lean plus a 5.7 MB compressed state fit)
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target /tmp/site ${WHL:-.whl}/*.whl >/dev/null 2>&1 || { echo "wheel install failed"; exit 1; }
 fi
