@@ -6,7 +6,8 @@ its tile is a random column of its family at its level, so an atlas built with b
 
 The rule (paper; thresholds from the authors' code): when a robot's episode ends it moves up one
 level if it ended within `up_distance` of the goal (planar) and within `up_yaw` of the goal's
-heading, otherwise down one level. A robot that clears the top level is sent to a random level.
+heading, otherwise down one level. A robot that clears the top level is sent to a random level;
+with `random_level_prob` any robot is, that often.
 Pure jnp functions on per-robot scalars, vmapped by the env with the robots.
 """
 
@@ -30,10 +31,17 @@ class CurriculumConfig:
     up_yaw: float = 0.4  # heading error (rad) under which a robot moves up
     initial_max_level: int = 1  # robots start uniformly in levels [0, initial_max_level]
     random_on_top: bool = True  # a robot that clears the top level goes to a random level
+    # the chance that any robot's next level is a random one instead (0: the paper's rule alone).
+    # Robots then train on levels above the one where half of them succeed, and walk down from
+    # there one level per failed episode.
+    random_level_prob: float = 0.0
     # how often each family of the atlas is drawn, in its order (() = uniformly)
     family_weights: tuple[float, ...] = ()
 
     def __post_init__(self):
+        if not 0.0 <= self.random_level_prob <= 1.0:
+            raise ConfigError("config key 'env.curriculum.random_level_prob': must be in [0, 1], "
+                              f"got {self.random_level_prob}")
         w = self.family_weights
         if w and (min(w) < 0 or sum(w) <= 0):
             raise ConfigError("config key 'env.curriculum.family_weights': must be >= 0 with a "
@@ -88,7 +96,7 @@ def next_level(
       level: [] int32 current level, 0-based.
       moved_up: [] bool, the robot ended close enough to the goal.
       num_levels: number of levels (static).
-      rng: key for the random level of robots that clear the top.
+      rng: key for the random level of robots that clear the top (and of the random jumps).
     """
     up = jnp.minimum(level + 1, num_levels - 1)
     down = jnp.maximum(level - 1, 0)
@@ -96,6 +104,10 @@ def next_level(
     if config.random_on_top:
         cleared_top = moved_up & (level == num_levels - 1)
         new = jnp.where(cleared_top, jax.random.randint(rng, (), 0, num_levels), new)
+    if config.random_level_prob > 0.0:  # other keys: with 0 the stream is the rule's alone
+        k_jump, k_level = jax.random.split(jax.random.fold_in(rng, 1))
+        jump = jax.random.uniform(k_jump) < config.random_level_prob
+        new = jnp.where(jump, jax.random.randint(k_level, (), 0, num_levels), new)
     return new.astype(jnp.int32)
 
 

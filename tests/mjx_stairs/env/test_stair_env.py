@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import terrains
+from mjx_stairs.config import ConfigError
 from mjx_stairs.env import curriculum as cur
 from mjx_stairs.env import observation
 from mjx_stairs.env import rewards as rw
@@ -286,6 +287,26 @@ def test_curriculum_rule_up_down_top_random_per_robot():
     assert not bool(cur.reached(jnp.float32(0.1), jnp.float32(0.5), cfg))
 
 
+def test_curriculum_random_level_prob_jumps_that_often_and_zero_is_the_rule():
+    n, keys = 10, jax.random.split(jax.random.PRNGKey(2), 4000)
+
+    def step(cfg, level, up):
+        return np.asarray(jax.vmap(lambda k: cur.next_level(jnp.int32(level), jnp.bool_(up), n,
+                                                            k, cfg))(keys))
+
+    rule = cur.CurriculumConfig()
+    assert np.all(step(dataclasses.replace(rule, random_level_prob=0.0), 4, False) == 3)
+    assert np.all(step(rule, 4, True) == 5)
+    mixed = step(dataclasses.replace(rule, random_level_prob=0.25), 4, True)
+    moved = mixed != 5  # a jump lands on 5 one time in 10
+    assert 0.25 * 0.9 - 0.03 < moved.mean() < 0.25 * 0.9 + 0.03
+    assert set(mixed[moved].tolist()) == set(range(n)) - {5}
+    every = step(dataclasses.replace(rule, random_level_prob=1.0), 0, False)
+    assert np.abs(np.bincount(every, minlength=n) / len(every) - 0.1).max() < 0.03
+    with pytest.raises(ConfigError, match="env.curriculum.random_level_prob"):
+        cur.CurriculumConfig(random_level_prob=1.5)
+
+
 def test_tile_table_keeps_family_columns():
     family = np.array([0, 0, 1, 1, 1, 0, 0, 1, 1, 1])  # 2 rows x 5 columns
     table = cur.TileTable(family, cols=5, num_families=2)
@@ -380,7 +401,7 @@ def test_waypoint_goal_is_what_the_policy_sees(u_atlas):
 
 
 def test_bad_goal_mode_is_a_one_line_error(u_atlas):
-    from mjx_stairs.config import ConfigError, from_dict
+    from mjx_stairs.config import from_dict
 
     with pytest.raises(ConfigError, match="config key 'env.goal_mode': expected one of"):
         from_dict(EnvConfig, {"goal_mode": "carrot"}, prefix="env")
