@@ -6,8 +6,8 @@ its tile is a random column of its family at its level, so an atlas built with b
 
 The rule (paper; thresholds from the authors' code): when a robot's episode ends it moves up one
 level if it ended within `up_distance` of the goal (planar) and within `up_yaw` of the goal's
-heading, otherwise down one level. A robot that clears the top level is sent to a random level;
-with `random_level_prob` any robot is, that often.
+heading, otherwise down one level. A robot that clears the top level is sent to a random level,
+and with `random_level_prob` any robot is, at that rate per episode.
 Pure jnp functions on per-robot scalars, vmapped by the env with the robots.
 """
 
