@@ -30,20 +30,28 @@ GRID = [f"d{d}i" + (f"_l{ms}" if ms else "") for d in ("0.1", "0.5", "1", "2")
 
 
 def overrides(config: str) -> tuple[str, ...]:
-    """d<damping>[i][_l<ms>]: e.g. d2 (explicit), d2i (implicit), d2i_l20 (and a fixed 20 ms
-    action delay, robot.action_delay_s, in MJX and the ground truth alike)."""
-    base, sep, lag = config.partition("_l")
+    """d<damping>[i][_l<ms>][_n<iterations>]: e.g. d2 (explicit), d2i (implicit), d2i_l20 (and a
+    fixed 20 ms action delay, robot.action_delay_s, in MJX and the ground truth alike), d2i_n30
+    (MJX's solver given 30 Newton iterations instead of the evaluation physics' 8; the ground
+    truth's solver is MuJoCo's default either way)."""
+    base, *parts = config.split("_")
     implicit = base.endswith("i")
     try:
-        if not base.startswith("d") or (sep and not lag):
+        if not base.startswith("d") or any(p[:1] not in ("l", "n") or not p[1:] for p in parts):
             raise ValueError
         damping = float(base[1:-1] if implicit else base[1:])
-        delay_ms = float(lag) if lag else 0.0
+        opts = {p[0]: float(p[1:]) for p in parts}
+        if len(opts) != len(parts) or ("n" in opts and opts["n"] != int(opts["n"])):
+            raise ValueError
     except ValueError:
-        raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>], e.g. d2, d2i or "
-                         "d2i_l20") from None
+        raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>][_n<iterations>], "
+                         "e.g. d2, d2i, d2i_l20 or d2i_n30") from None
     out = (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
-    return out + ((f"robot.action_delay_s={delay_ms / 1000}",) if delay_ms else ())
+    if opts.get("l"):
+        out += (f"robot.action_delay_s={opts['l'] / 1000}",)
+    if "n" in opts:
+        out += (f"robot.solver_iterations={int(opts['n'])}",)
+    return out
 
 
 def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config: str,

@@ -1,5 +1,5 @@
-"""experiments/damping_gt.py's configs: damping, its integration and a fixed action delay, and
-the grid of docs/deploy.md."""
+"""experiments/damping_gt.py's configs: damping, its integration, a fixed action delay and MJX's
+Newton iterations, and the grid of docs/deploy.md."""
 
 import importlib.util
 from pathlib import Path
@@ -27,6 +27,10 @@ def test_a_config_names_damping_integration_and_delay():
     robot = env_config_from(None, (EVAL, *damping_gt.overrides("d0.5i_l15"))).robot
     assert (robot.joint_damping, robot.implicit_damping) == (0.5, True)
     assert robot.action_delay_s == pytest.approx(0.015)
+    # _n<iterations>: MJX's Newton iterations, after the delay or alone
+    n30 = env_config_from(None, (EVAL, *damping_gt.overrides("d2i_l20_n30"))).robot
+    assert (n30.solver_iterations, n30.joint_damping, n30.action_delay_s) == (30, 2.0, 0.02)
+    assert env_config_from(None, (EVAL, *damping_gt.overrides("d2i"))).robot.solver_iterations == 8
 
 
 def test_the_grid_is_damping_by_delay_and_every_cell_is_a_valid_env():
@@ -37,7 +41,8 @@ def test_the_grid_is_damping_by_delay_and_every_cell_is_a_valid_env():
     assert sorted(round(d, 3) for d in delays) == [0.0, 0.005, 0.01, 0.015, 0.02]
 
 
-@pytest.mark.parametrize("bad", ["x2", "d", "dfoo", "d2i_l", "d2i_lx"])
+@pytest.mark.parametrize("bad", ["x2", "d", "dfoo", "d2i_l", "d2i_lx", "d2i_n", "d2i_n2.5",
+                                 "d2i_q3"])
 def test_a_bad_config_is_a_one_line_error(bad):
     with pytest.raises(SystemExit, match=f"config '{bad}': expected") as e:
         damping_gt.overrides(bad)
