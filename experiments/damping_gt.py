@@ -36,21 +36,21 @@ def overrides(config: str) -> tuple[str, ...]:
     truth's solver is MuJoCo's default either way)."""
     base, *parts = config.split("_")
     implicit = base.endswith("i")
+    opts = {p[:1]: p[1:] for p in parts}  # l<ms>, n<iterations>, each at most once
     try:
-        if not base.startswith("d") or any(p[:1] not in ("l", "n") or not p[1:] for p in parts):
+        if not base.startswith("d") or len(opts) != len(parts) or not set(opts) <= {"l", "n"}:
             raise ValueError
         damping = float(base[1:-1] if implicit else base[1:])
-        opts = {p[0]: float(p[1:]) for p in parts}
-        if len(opts) != len(parts) or ("n" in opts and opts["n"] != int(opts["n"])):
-            raise ValueError
+        delay_ms = float(opts["l"]) if "l" in opts else 0.0
+        iterations = int(opts["n"]) if "n" in opts else None
     except ValueError:
         raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>][_n<iterations>], "
                          "e.g. d2, d2i, d2i_l20 or d2i_n30") from None
     out = (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
-    if opts.get("l"):
-        out += (f"robot.action_delay_s={opts['l'] / 1000}",)
-    if "n" in opts:
-        out += (f"robot.solver_iterations={int(opts['n'])}",)
+    if delay_ms:
+        out += (f"robot.action_delay_s={delay_ms / 1000}",)
+    if iterations is not None:
+        out += (f"robot.solver_iterations={iterations}",)
     return out
 
 

@@ -30,7 +30,7 @@ from mjx_stairs.study.specs import EvalSpec
 
 
 def rollout(env, policy, state):
-    """Long: per robot of its first episode -> (finished, success, end distance, end |yaw
+    """Per robot of its first episode -> (finished, success, end distance, end |yaw
     error|, largest |yaw error| after the success)."""
 
     def where(st):
