@@ -80,7 +80,9 @@ train() {  # train NAME TOML [overrides...]; resumes from $KEEP/NAME/ (what an e
   local budget=$(( $(left) - ${TRAIN_MARGIN_S:-25} ))
   [ -n "${TRAIN_BUDGET_S:-}" ] && [ "$TRAIN_BUDGET_S" -lt "$budget" ] && budget=$TRAIN_BUDGET_S
   local resume=() prev=""  # where the run goes on from: kept here, else carried, else nowhere
-  [ -z "${FRESH:-}" ] && for prev in "$KEEP/$name" ".carry/$name" ""; do
+  # RESUME_FROM (a folder holding state.npz): where a run starts when nothing of its own is kept
+  # or carried, e.g. a variant resumed from another run's carried state (one state, two runs)
+  [ -z "${FRESH:-}" ] && for prev in "$KEEP/$name" ".carry/$name" ${RESUME_FROM:-} ""; do
     [ -f "$prev/state.npz" ] && break
   done
   [ -n "$prev" ] && resume=(--resume "$prev/state.npz")
