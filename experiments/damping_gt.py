@@ -29,29 +29,40 @@ GRID = [f"d{d}i" + (f"_l{ms}" if ms else "") for d in ("0.1", "0.5", "1", "2")
         for ms in (0, 5, 10, 15, 20)]  # docs/deploy.md's grid of damping and action delay
 
 
-def overrides(config: str) -> tuple[str, ...]:
-    """d<damping>[i][_l<ms>][_n<iterations>]: e.g. d2 (explicit), d2i (implicit), d2i_l20 (and a
-    fixed 20 ms action delay, robot.action_delay_s, in MJX and the ground truth alike), d2i_n30
-    (MJX's solver given 30 Newton iterations instead of the evaluation physics' 8; the ground
-    truth's solver is MuJoCo's default either way)."""
+def parse(config: str) -> tuple[tuple[str, ...], int | None]:
+    """d<damping>[i][_l<ms>][_n<iterations>][_c<contacts>] -> (env overrides, contacts): e.g. d2
+    (explicit), d2i (implicit), d2i_l20 (and a fixed 20 ms action delay, robot.action_delay_s, in
+    MJX and the ground truth alike), d2i_n30 (MJX's solver given 30 Newton iterations instead of
+    the evaluation physics' 8; the ground truth's solver is MuJoCo's default either way), d2i_c3
+    (MJX's columns collider with 3 contacts a sphere instead of 2,
+    `sim.contact.set_columns_ncon`; the ground truth has one contact per box touched)."""
     base, *parts = config.split("_")
     implicit = base.endswith("i")
-    opts = {p[:1]: p[1:] for p in parts}  # l<ms>, n<iterations>, each at most once
+    opts = {p[:1]: p[1:] for p in parts}  # l<ms>, n<iterations>, c<contacts>, each at most once
     try:
-        if not base.startswith("d") or len(opts) != len(parts) or not set(opts) <= {"l", "n"}:
+        if (not base.startswith("d") or len(opts) != len(parts)
+                or not set(opts) <= {"l", "n", "c"}):
             raise ValueError
         damping = float(base[1:-1] if implicit else base[1:])
         delay_ms = float(opts["l"]) if "l" in opts else 0.0
         iterations = int(opts["n"]) if "n" in opts else None
+        contacts = int(opts["c"]) if "c" in opts else None
+        if contacts is not None and contacts < 1:
+            raise ValueError
     except ValueError:
-        raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>][_n<iterations>], "
-                         "e.g. d2, d2i, d2i_l20 or d2i_n30") from None
+        raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>][_n<iterations>]"
+                         "[_c<contacts>], e.g. d2, d2i, d2i_l20, d2i_n30 or d2i_c3") from None
     out = (f"robot.joint_damping={damping}", f"robot.implicit_damping={str(implicit).lower()}")
     if delay_ms:
         out += (f"robot.action_delay_s={delay_ms / 1000}",)
     if iterations is not None:
         out += (f"robot.solver_iterations={iterations}",)
-    return out
+    return out, contacts
+
+
+def overrides(config: str) -> tuple[str, ...]:
+    """The env overrides of a config name (`parse`)."""
+    return parse(config)[0]
 
 
 def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config: str,
@@ -63,6 +74,10 @@ def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config
     path = out / f"{what}_{config}.json"
     if path.is_file():
         return json.loads(path.read_text())
+    contacts = parse(config)[1]
+    if contacts is not None:  # this process only (a fresh one per config and what)
+        from mjx_stairs.sim import contact
+        contact.set_columns_ncon(contacts)
     policy = load_policy(policy_path)
     spec = CellSpec(cells=(cell,), robots_per_cell=robots, seed=seed,
                     env_overrides=overrides(config))
@@ -70,6 +85,7 @@ def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config
     rec = (success_by_cell({"p": policy}, spec)["p"] if what == "mjx"
            else success_in_ground_truth(policy, spec))
     rec.update(policy=policy_path, config=config, overrides=list(overrides(config)),
+               columns_contacts=parse(config)[1],
                wall_s_total=time.time() - t0)
     from mjx_stairs.atomic import write_text
 

@@ -31,6 +31,9 @@ def test_a_config_names_damping_integration_and_delay():
     n30 = env_config_from(None, (EVAL, *damping_gt.overrides("d2i_l20_n30"))).robot
     assert (n30.solver_iterations, n30.joint_damping, n30.action_delay_s) == (30, 2.0, 0.02)
     assert env_config_from(None, (EVAL, *damping_gt.overrides("d2i"))).robot.solver_iterations == 8
+    # _c<contacts>: the columns collider's contacts a sphere, no env override
+    assert damping_gt.parse("d2i_c3") == (damping_gt.overrides("d2i"), 3)
+    assert damping_gt.parse("d2i_l20")[1] is None
 
 
 def test_the_grid_is_damping_by_delay_and_every_cell_is_a_valid_env():
@@ -42,7 +45,7 @@ def test_the_grid_is_damping_by_delay_and_every_cell_is_a_valid_env():
 
 
 @pytest.mark.parametrize("bad", ["x2", "d", "dfoo", "d2i_l", "d2i_lx", "d2i_n", "d2i_n2.5",
-                                 "d2i_q3"])
+                                 "d2i_q3", "d2i_c0", "d2i_c"])
 def test_a_bad_config_is_a_one_line_error(bad):
     with pytest.raises(SystemExit, match=f"config '{bad}': expected") as e:
         damping_gt.overrides(bad)

@@ -35,6 +35,8 @@ MJX's own collider.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -145,8 +147,9 @@ def sphere_heightfield(h, s, subgrid_size: tuple[int, int]):
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
 
 
-def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top"):
-    """(dist [NCON], pos [NCON, 3], frame [NCON, 3, 3]) of one sphere against the heightfield's
+def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top",
+                   ncon: int = NCON):
+    """(dist [ncon], pos [ncon, 3], frame [ncon, 3, 3]) of one sphere against the heightfield's
     grid read as columns, as `terrains.boxes.grid_boxes` builds the ground truth: grid point
     (ix, iy) owns the square cell around it (half a spacing each way), a flat-topped column from
     the field's base up to its height, so risers are vertical and edges sharp.
@@ -154,7 +157,10 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top"):
     The distance to a union of boxes is the least distance to one of them, and the nearest point
     of an axis-aligned box is the centre clamped to it. The first contact is the nearest column,
     the second the nearest column in front of the first contact's plane (the riser of a concave
-    corner), as in `sphere_heightfield`. A centre inside a column (the sphere sunk deeper than
+    corner), as in `sphere_heightfield`; with ``ncon`` > 2 each further contact is the nearest
+    column in front of every earlier contact's plane (a third face: the other riser of a corner
+    where a step edge runs across the grid, as on a spiral). A centre inside a column (the sphere
+    sunk deeper than
     its radius) is pushed out through that column's top (``sunk_exit="top"``: right for a foot
     sunk into a tread, but a foot driven into a riser is lifted onto the step above), or through
     its nearest exposed face (``"nearest"``: the top, or a side whose neighbouring column stands
@@ -196,13 +202,20 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top"):
     n1 = jnp.where(sunk, n_in, n1)
     pos1 = jnp.where(sunk, q_in + 0.5 * (-depth - r) * n_in, pos1)
     q1 = jnp.where(sunk, q_in, q[k1])
-    ahead = (q - q1) @ n1 > FRONT * r
-    k2 = jnp.argmin(jnp.where(ahead, d, jnp.inf))
-    dist2, pos2, n2 = contact(k2)
-    dist2 = jnp.where(jnp.any(ahead) & ~sunk, dist2, 1.0)
-    dist = jnp.stack([dist1, dist2])
-    pos = jnp.stack([pos1, pos2]) @ h.mat.T + h.pos
-    n = jnp.stack([n1, n2]) @ h.mat.T
+    dists, poss, ns = [dist1], [pos1], [n1]
+    ahead = jnp.ones_like(d, bool)
+    qj, nj = q1, n1
+    for _ in range(ncon - 1):  # each further contact: in front of every earlier contact's plane
+        ahead = ahead & ((q - qj) @ nj > FRONT * r)
+        kj = jnp.argmin(jnp.where(ahead, d, jnp.inf))
+        distj, posj, nj = contact(kj)
+        dists.append(jnp.where(jnp.any(ahead) & ~sunk, distj, 1.0))
+        poss.append(posj)
+        ns.append(nj)
+        qj = q[kj]
+    dist = jnp.stack(dists)
+    pos = jnp.stack(poss) @ h.mat.T + h.pos
+    n = jnp.stack(ns) @ h.mat.T
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
 
 
@@ -232,9 +245,9 @@ def _exit_face(h, p, ix, iy, lo, hi, sunk_exit: str):
     return depth[j], normals[j]
 
 
-def sphere_columns_nearest_exit(h, s, subgrid_size: tuple[int, int]):
+def sphere_columns_nearest_exit(h, s, subgrid_size: tuple[int, int], ncon: int = NCON):
     """`sphere_columns` with ``sunk_exit="nearest"``."""
-    return sphere_columns(h, s, subgrid_size, sunk_exit="nearest")
+    return sphere_columns(h, s, subgrid_size, sunk_exit="nearest", ncon=ncon)
 
 
 COLUMNS_HFIELD = "terrain_columns"
@@ -246,12 +259,32 @@ on the asset's name."""
 COLUMNS_EXIT_HFIELD = "terrain_columns_exit"
 """The heightfield asset name that selects `sphere_columns_nearest_exit`."""
 
-_NEAREST = collision_convex.collider(ncon=NCON)(sphere_heightfield)
-_BY_NAME = {
-    COLUMNS_HFIELD: collision_convex.collider(ncon=NCON)(sphere_columns),
-    COLUMNS_EXIT_HFIELD: collision_convex.collider(ncon=NCON)(sphere_columns_nearest_exit),
-}
 KEY = (GeomType.HFIELD, GeomType.ELLIPSOID)
+
+
+def _padded(fn, ncon: int):
+    """`fn` (NCON contacts) with inactive contacts appended up to ``ncon``."""
+    def padded(h, s, subgrid_size):
+        dist, pos, frame = fn(h, s, subgrid_size)
+        k = ncon - dist.shape[0]
+        return (jnp.concatenate([dist, jnp.ones(k, dist.dtype)]),
+                jnp.concatenate([pos, jnp.repeat(pos[-1:], k, 0)]),
+                jnp.concatenate([frame, jnp.repeat(frame[-1:], k, 0)]))
+    return padded
+
+
+def _colliders(ncon: int) -> tuple:
+    """(nearest-point collider, {asset name: columns collider}) with ``ncon`` contacts a pair."""
+    nearest = sphere_heightfield if ncon == NCON else _padded(sphere_heightfield, ncon)
+    return (collision_convex.collider(ncon=ncon)(nearest), {
+        COLUMNS_HFIELD: collision_convex.collider(ncon=ncon)(
+            functools.partial(sphere_columns, ncon=ncon)),
+        COLUMNS_EXIT_HFIELD: collision_convex.collider(ncon=ncon)(
+            functools.partial(sphere_columns_nearest_exit, ncon=ncon)),
+    })
+
+
+_NEAREST, _BY_NAME = _colliders(NCON)
 
 
 def _collide(m, d, key, geom):
@@ -262,6 +295,18 @@ def _collide(m, d, key, geom):
 
 _collide.ncon = NCON
 _COLLIDER = _collide
+
+
+def set_columns_ncon(ncon: int) -> None:
+    """Give the columns colliders ``ncon`` contacts a sphere (the nearest-point one is padded):
+    a study of the contact count (issue 19, experiments/damping_gt.py's ``_c<n>``), for a whole
+    process, before any model is put on the device or any step is traced; MJX sizes every
+    (heightfield, ellipsoid) pair's contacts from this count. Not a training option."""
+    global _NEAREST, _BY_NAME
+    if ncon < 1:
+        raise ValueError(f"ncon must be at least 1, got {ncon}")
+    _NEAREST, _BY_NAME = _colliders(ncon)
+    _collide.ncon = ncon
 
 
 def register() -> None:

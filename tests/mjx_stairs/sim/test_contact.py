@@ -306,3 +306,41 @@ def test_columns_sunk_centre_leaves_by_the_top_or_the_nearest_exposed_face():
     np.testing.assert_allclose([d, *n], [-0.005 - r, -1, 0, 0], atol=1e-5)
     with pytest.raises(Exception, match="sunk_exit"):
         rb.RobotConfig(terrain_contacts="columns", sunk_exit="side")
+
+
+def test_columns_third_contact_is_the_other_riser_of_a_corner_across_the_grid():
+    """Where a step edge runs across the grid (a spiral's radial edges), a sphere in a concave
+    corner touches a tread and two risers at right angles; the ground truth's boxes give all
+    three. With 3 contacts a sphere (`set_columns_ncon`, issue 19's study) the columns collider
+    gives the third; its first two are the 2-contact collider's, bit for bit."""
+    res, r = 0.025, 0.03
+    heights = np.zeros((24, 64), np.float32)  # rows along y, columns along x
+    heights[:, 44:] = 0.16  # a riser facing -x at x = 1.0875
+    heights[12:, :] = 0.16  # and one facing -y at y = 0.2875
+    m = rb.build_mj_model(heights, res, rb.RobotConfig(terrain_contacts="columns",
+                                                       sunk_exit="nearest"))
+    mx = mjx.put_model(m)
+    hid = m.geom("terrain").id
+    info = mesh.hfield(mx, int(m.geom_dataid[hid])).replace(
+        pos=jnp.asarray(m.geom_pos[hid]), mat=jnp.eye(3))
+    sphere = GeomInfo(jnp.array([1.0875 - r + 1e-3, 0.2875 - r + 1e-3, r - 1e-3]), jnp.eye(3),
+                      jnp.full(3, r))
+    d2, p2, f2 = contact.sphere_columns_nearest_exit(info, sphere, (4, 4))
+    d3, p3, f3 = contact.sphere_columns_nearest_exit(info, sphere, (4, 4), ncon=3)
+    assert d2.shape == (2,) and d3.shape == (3,)
+    np.testing.assert_allclose(np.asarray(d3), [-1e-3] * 3, atol=1e-5)
+    normals = sorted(map(tuple, np.round(np.asarray(f3[:, 0]), 5)))
+    assert normals == [(-1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0)]
+    for a, b in ((d2, d3[:2]), (p2, p3[:2]), (f2, f3[:2])):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # On a flat tread the extra contacts stay inactive.
+    flat = GeomInfo(jnp.array([0.5, 0.1, r - 1e-3]), jnp.eye(3), jnp.full(3, r))
+    d = np.asarray(contact.sphere_columns_nearest_exit(info, flat, (4, 4), ncon=3)[0])
+    assert d[0] < 0 and (d[1:] > 0.5).all()
+    # The process-wide switch sizes every (heightfield, ellipsoid) pair's contacts; back to 2.
+    try:
+        contact.set_columns_ncon(3)
+        assert collision_driver._COLLISION_FUNC[contact.KEY].ncon == 3
+    finally:
+        contact.set_columns_ncon(contact.NCON)
+    assert collision_driver._COLLISION_FUNC[contact.KEY].ncon == contact.NCON
