@@ -100,13 +100,33 @@ def parse_cell(cell: str) -> tuple[str, int]:
     raise SystemExit(f"cell {cell!r}: expected up<level> or down<level>, e.g. up6")
 
 
+def code_case(cell: str):
+    """The `code` suite's case `cell` (its name without the suite's prefix, e.g.
+    commercial_straight_up)."""
+    from terrains.suites import load_suite
+
+    cases = {c.name.removeprefix("code_"): c for c in load_suite("code")}
+    if cell not in cases:
+        raise SystemExit(f"cell {cell!r}: not a code suite case; known: {', '.join(cases)}")
+    return cases[cell]
+
+
+def check_cell(family: str, cell: str) -> None:
+    """A bad cell name fails before anything runs."""
+    code_case(cell) if family == "code" else parse_cell(cell)
+
+
 def _job(args) -> str:
-    onnx, family, cell, robot, out, episodes, latency = args
+    onnx, family, cell, robot, out, episodes, latency, episode_s = args
     from mjx_stairs.tools import sim2sim
 
-    direction, level = parse_cell(cell)
-    course = sim2sim.family_course(family, level, "test", direction)
-    r = sim2sim.run(onnx, course, sim2sim.Options(episodes=episodes, latency_ms=latency),
+    if family == "code":
+        course = sim2sim.tile_course(code_case(cell).tile(), f"code_{cell}")
+    else:
+        direction, level = parse_cell(cell)
+        course = sim2sim.family_course(family, level, "test", direction)
+    r = sim2sim.run(onnx, course, sim2sim.Options(episodes=episodes, latency_ms=latency,
+                                                  episode_s=episode_s),
                     robot=robot, out=out)
     return f"{out}: {100 * r['success']:.1f} % success, {100 * r['fell']:.1f} % falls, " \
            f"{r['wall_s']:.0f} s"
@@ -142,11 +162,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--onnx", required=True)
-    ap.add_argument("--family", default="u_shaped")
+    ap.add_argument("--family", default="u_shaped",
+                    help="a family (cells up<level>/down<level> of its test levels), or code "
+                         "(cells: the code suite's case names, e.g. commercial_straight_up)")
     ap.add_argument("--cells", default="up6")
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--latency-ms", type=float, default=0.0)
+    ap.add_argument("--episode-s", type=float, default=20.0, help="30 as the code suite's")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     a = ap.parse_args()
     variants, cells = a.variants.split(","), a.cells.split(",")
@@ -154,7 +177,7 @@ def main() -> None:
         if v not in VARIANTS:
             raise SystemExit(f"unknown variant {v!r}; known: {', '.join(VARIANTS)}")
     for c in cells:
-        parse_cell(c)
+        check_cell(a.family, c)
     jobs = []
     for v in variants:
         robot = write_robot(v, a.out)
@@ -162,14 +185,17 @@ def main() -> None:
         for c in cells:
             out = a.out / v / f"{c}.json"
             if not out.is_file():
-                jobs.append((a.onnx, a.family, c, str(robot), str(out), a.episodes, a.latency_ms))
+                jobs.append((a.onnx, a.family, c, str(robot), str(out), a.episodes, a.latency_ms,
+                             a.episode_s))
     with ProcessPoolExecutor(a.workers) as pool:
         for line in pool.map(_job, jobs):
             print(line, flush=True)
     text = table(a.out, variants, cells)
-    note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell, {a.family} test levels, "
-            f"sim2sim's starts (seed 0), latency {a.latency_ms:g} ms; +gained/-lost: starts that "
-            "succeed with the variant and not with `full`, and the reverse; trunk, calf: "
+    where = "the code suite" if a.family == "code" else f"{a.family} test levels"
+    note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell ({a.episode_s:g} s), "
+            f"{where}, sim2sim's starts (seed 0), latency {a.latency_ms:g} ms; +gained/-lost: "
+            "starts that succeed with the variant and not with `full`, and the reverse; trunk, "
+            "calf: "
             f"step-edge touches per episode. Policy: {a.onnx}.\n")
     (a.out / "table.md").write_text(text + note)
     print(text + note)
