@@ -47,7 +47,7 @@ def parse(config: str) -> tuple[tuple[str, ...], int | None]:
         delay_ms = float(opts["l"]) if "l" in opts else 0.0
         iterations = int(opts["n"]) if "n" in opts else None
         contacts = int(opts["c"]) if "c" in opts else None
-        if contacts is not None and contacts < 1:
+        if contacts is not None and contacts < 2:  # sim.contact.NCON, the least
             raise ValueError
     except ValueError:
         raise SystemExit(f"config {config!r}: expected d<damping>[i][_l<ms>][_n<iterations>]"

@@ -45,7 +45,7 @@ def test_the_grid_is_damping_by_delay_and_every_cell_is_a_valid_env():
 
 
 @pytest.mark.parametrize("bad", ["x2", "d", "dfoo", "d2i_l", "d2i_lx", "d2i_n", "d2i_n2.5",
-                                 "d2i_q3", "d2i_c0", "d2i_c"])
+                                 "d2i_q3", "d2i_c1", "d2i_c"])
 def test_a_bad_config_is_a_one_line_error(bad):
     with pytest.raises(SystemExit, match=f"config '{bad}': expected") as e:
         damping_gt.overrides(bad)

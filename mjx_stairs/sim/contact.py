@@ -159,12 +159,12 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top",
     the second the nearest column in front of the first contact's plane (the riser of a concave
     corner), as in `sphere_heightfield`; with ``ncon`` > 2 each further contact is the nearest
     column in front of every earlier contact's plane (a third face: the other riser of a corner
-    where a step edge runs across the grid, as on a spiral). A centre inside a column (the sphere
-    sunk deeper than
-    its radius) is pushed out through that column's top (``sunk_exit="top"``: right for a foot
-    sunk into a tread, but a foot driven into a riser is lifted onto the step above), or through
-    its nearest exposed face (``"nearest"``: the top, or a side whose neighbouring column stands
-    lower than the centre), as MuJoCo's box pushes it (issue 19, docs/results.md section 5b).
+    where a step edge runs across the grid, as on a spiral). A centre inside a column (the
+    sphere sunk deeper than its radius) is pushed out through that column's top
+    (``sunk_exit="top"``: right for a foot sunk into a tread, but a foot driven into a riser is
+    lifted onto the step above), or through its nearest exposed face (``"nearest"``: the top, or
+    a side whose neighbouring column stands lower than the centre), as MuJoCo's box pushes it
+    (issue 19, docs/results.md section 5b).
     """
     r = s.size[0]
     p = h.mat.T @ (s.pos - h.pos)
@@ -303,8 +303,8 @@ def set_columns_ncon(ncon: int) -> None:
     process, before any model is put on the device or any step is traced; MJX sizes every
     (heightfield, ellipsoid) pair's contacts from this count. Not a training option."""
     global _NEAREST, _BY_NAME
-    if ncon < 1:
-        raise ValueError(f"ncon must be at least 1, got {ncon}")
+    if ncon < NCON:
+        raise ValueError(f"ncon must be at least {NCON} (the nearest-point collider's), got {ncon}")
     _NEAREST, _BY_NAME = _colliders(ncon)
     _collide.ncon = ncon
 

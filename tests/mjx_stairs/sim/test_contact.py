@@ -344,3 +344,5 @@ def test_columns_third_contact_is_the_other_riser_of_a_corner_across_the_grid():
     finally:
         contact.set_columns_ncon(contact.NCON)
     assert collision_driver._COLLISION_FUNC[contact.KEY].ncon == contact.NCON
+    with pytest.raises(ValueError, match="at least 2"):
+        contact.set_columns_ncon(1)
