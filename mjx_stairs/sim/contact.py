@@ -157,10 +157,9 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top",
     The distance to a union of boxes is the least distance to one of them, and the nearest point
     of an axis-aligned box is the centre clamped to it. The first contact is the nearest column,
     the second the nearest column in front of the first contact's plane (the riser of a concave
-    corner), as in `sphere_heightfield`; with ``ncon`` > 2 each further contact is the nearest
-    column in front of every earlier contact's plane (a third face: the other riser of a corner
-    where a step edge runs across the grid, as on a spiral). A centre inside a column (the
-    sphere sunk deeper than its radius) is pushed out through that column's top
+    corner), as in `sphere_heightfield`; each further one (``ncon`` > 2) the nearest column in
+    front of every earlier contact's plane (the other riser where a step edge crosses the grid).
+    A centre inside a column (the sphere sunk deeper than its radius) leaves through its top
     (``sunk_exit="top"``: right for a foot sunk into a tread, but a foot driven into a riser is
     lifted onto the step above), or through its nearest exposed face (``"nearest"``: the top, or
     a side whose neighbouring column stands lower than the centre), as MuJoCo's box pushes it
@@ -202,21 +201,27 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top",
     n1 = jnp.where(sunk, n_in, n1)
     pos1 = jnp.where(sunk, q_in + 0.5 * (-depth - r) * n_in, pos1)
     q1 = jnp.where(sunk, q_in, q[k1])
-    dists, poss, ns = [dist1], [pos1], [n1]
-    ahead = jnp.ones_like(d, bool)
-    qj, nj = q1, n1
-    for _ in range(ncon - 1):  # each further contact: in front of every earlier contact's plane
-        ahead = ahead & ((q - qj) @ nj > FRONT * r)
+    found = [(dist1, pos1, n1)] + _further_contacts(q, d, q1, n1, contact, ~sunk, FRONT * r,
+                                                    ncon - 1)
+    dist = jnp.stack([c[0] for c in found])
+    pos = jnp.stack([c[1] for c in found]) @ h.mat.T + h.pos
+    n = jnp.stack([c[2] for c in found]) @ h.mat.T
+    return dist, pos, jax.vmap(mjx_math.make_frame)(n)
+
+
+def _further_contacts(q, d, q1, n1, contact, active, front: float, count: int) -> list:
+    """``count`` contacts after the first (point q1 of column, normal n1): each the nearest
+    column (of nearest points q [C, 3], distances d [C]) in front of every earlier contact's
+    plane by more than ``front``, as (dist, pos, normal) from ``contact(k)``; inactive (dist 1)
+    where no column is in front, or where ``active`` is false (a sunk centre)."""
+    out, ahead, qj, nj = [], jnp.ones_like(d, bool), q1, n1
+    for _ in range(count):
+        ahead = ahead & ((q - qj) @ nj > front)
         kj = jnp.argmin(jnp.where(ahead, d, jnp.inf))
         distj, posj, nj = contact(kj)
-        dists.append(jnp.where(jnp.any(ahead) & ~sunk, distj, 1.0))
-        poss.append(posj)
-        ns.append(nj)
+        out.append((jnp.where(jnp.any(ahead) & active, distj, 1.0), posj, nj))
         qj = q[kj]
-    dist = jnp.stack(dists)
-    pos = jnp.stack(poss) @ h.mat.T + h.pos
-    n = jnp.stack(ns) @ h.mat.T
-    return dist, pos, jax.vmap(mjx_math.make_frame)(n)
+    return out
 
 
 def _exit_face(h, p, ix, iy, lo, hi, sunk_exit: str):
