@@ -74,18 +74,18 @@ def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config
     path = out / f"{what}_{config}.json"
     if path.is_file():
         return json.loads(path.read_text())
-    contacts = parse(config)[1]
+    env_overrides, contacts = parse(config)
     if contacts is not None:  # this process only (a fresh one per config and what)
         from mjx_stairs.sim import contact
         contact.set_columns_ncon(contacts)
     policy = load_policy(policy_path)
     spec = CellSpec(cells=(cell,), robots_per_cell=robots, seed=seed,
-                    env_overrides=overrides(config))
+                    env_overrides=env_overrides)
     t0 = time.time()
     rec = (success_by_cell({"p": policy}, spec)["p"] if what == "mjx"
            else success_in_ground_truth(policy, spec))
-    rec.update(policy=policy_path, config=config, overrides=list(overrides(config)),
-               columns_contacts=parse(config)[1],
+    rec.update(policy=policy_path, config=config, overrides=list(env_overrides),
+               columns_contacts=contacts,
                wall_s_total=time.time() - t0)
     from mjx_stairs.atomic import write_text
 

@@ -103,12 +103,12 @@ def parse_cell(cell: str) -> tuple[str, int]:
 def code_case(cell: str):
     """The `code` suite's case `cell` (its name without the suite's prefix, e.g.
     commercial_straight_up)."""
-    from terrains.suites import load_suite
+    from terrains.suites import find_case
 
-    cases = {c.name.removeprefix("code_"): c for c in load_suite("code")}
-    if cell not in cases:
-        raise SystemExit(f"cell {cell!r}: not a code suite case; known: {', '.join(cases)}")
-    return cases[cell]
+    try:
+        return find_case("code", f"code_{cell}")
+    except ValueError as e:
+        raise SystemExit(f"cell {cell!r}: {e}") from None
 
 
 def check_cell(family: str, cell: str) -> None:
@@ -195,8 +195,7 @@ def main() -> None:
     note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell ({a.episode_s:g} s), "
             f"{where}, sim2sim's starts (seed 0), latency {a.latency_ms:g} ms; +gained/-lost: "
             "starts that succeed with the variant and not with `full`, and the reverse; trunk, "
-            "calf: "
-            f"step-edge touches per episode. Policy: {a.onnx}.\n")
+            f"calf: step-edge touches per episode. Policy: {a.onnx}.\n")
     (a.out / "table.md").write_text(text + note)
     print(text + note)
 

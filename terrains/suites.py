@@ -80,6 +80,14 @@ def load_suite(name: str) -> list[Case]:
     return cases
 
 
+def find_case(suite: str, name: str) -> Case:
+    """The case ``name`` of suite ``suite``; unknown -> ValueError naming the known cases."""
+    cases = {c.name: c for c in load_suite(suite)}
+    if name not in cases:
+        raise ValueError(f"no case {name!r} in suite {suite!r}; known: {', '.join(cases)}")
+    return cases[name]
+
+
 def _code_staircase(sh: dict, dims: dict, name: str) -> Staircase:
     kw = {k: v for k, v in sh.items() if k not in ("shape", "flights", "landing")}
     landing = dims["width"] if sh.get("landing") == "width" else sh.get("landing", 1.2)

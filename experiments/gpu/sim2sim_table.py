@@ -61,15 +61,14 @@ def course_of(spec: tuple) -> s2s.Course:
     """("family", family, schedule, level, variant, resolution, tile_size, direction) or
     ("case", suite, case name, resolution) -> the course (cached per worker process)."""
     import terrains
-    from terrains.suites import load_suite
+    from terrains.suites import find_case
 
     if spec[0] == "family":
         _, fam, sched, lv, variant, res, size, direction = spec
         tile = terrains.make_tile(fam, lv, variant, sched, res, size, direction=direction)
         return s2s.tile_course(tile, f"{cell_name(fam, sched, lv, direction)}_{variant}")
     _, suite, name, res = spec
-    (case,) = [c for c in load_suite(suite) if c.name == name]
-    return s2s.tile_course(case.tile(res), name)
+    return s2s.tile_course(find_case(suite, name).tile(res), name)
 
 
 def run_task(task: tuple) -> tuple[str, list[dict]]:

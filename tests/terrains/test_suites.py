@@ -84,3 +84,13 @@ def test_cli_direction_and_errors(tmp_path, capsys):
     assert "--levels 11 out of range" in capsys.readouterr().err
     assert main(["suite", "office", "--out", str(tmp_path / "x")]) == 2
     assert "unknown suite 'office'" in capsys.readouterr().err
+
+
+def test_find_case_by_name_or_a_clear_error():
+    from terrains.suites import find_case
+
+    case = find_case("code", "code_residential_u_left_down")
+    assert (case.direction, case.staircase.riser) == ("down", 0.197)
+    assert find_case("paper", "paper_spiral_level6_up").level == 5
+    with pytest.raises(ValueError, match="no case 'code_ramp_up' in suite 'code'"):
+        find_case("code", "code_ramp_up")
