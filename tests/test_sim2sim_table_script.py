@@ -54,3 +54,18 @@ def test_the_table_has_the_mjx_column_of_those_starts(out):
     rows = (out / "table.md").read_text().splitlines()
     assert "robot success" in rows[0] and "gap (robot - sim2sim)" in rows[0]
     assert rows[2].startswith("| straight_test_down_L2 | 4 |")
+
+
+def test_a_code_suite_file_is_an_mjx_column_of_the_code_cases(tmp_path):
+    src = ROOT / "experiments/results/code_suite/evaluation_exit_d2/code_generalist_mix_1940.json"
+    args = table.main.__globals__["argparse"].Namespace(
+        mjx=False, mjx_column=[], mjx_json=None, cells=["code"], mjx_code=[f"MJX d2={src}"])
+    cols = table.mjx_columns(args, tmp_path)
+    want = json.loads(src.read_text())["results"]
+    assert list(cols) == ["MJX d2"] and len(cols["MJX d2"]) == len(want) == 24
+    for r in want:
+        assert cols["MJX d2"][r["name"]] == r["success"]
+    # a case's record carries its own direction, whatever --direction says
+    assert table.cell_direction("code_residential_u_left_down", "up") == "down"
+    assert table.cell_direction("code_commercial_straight_up", "down") == "up"
+    assert table.cell_direction("straight_test_down_L2", "down") == "down"

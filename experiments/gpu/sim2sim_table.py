@@ -175,13 +175,22 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
         r = r["policies"][args.mjx_policy] if "policies" in r else r
         cols["MJX"] = {cell_name(c["family"], c["schedule"], c["level"] - 1): s
                        for c, s in zip(r["cells"], r["success"], strict=True)}
+    for name, _, path in (c.partition("=") for c in args.mjx_code):  # code_suite.py's files
+        results = json.loads(Path(path).read_text())["results"]
+        cols[name] = {r["name"]: r["success"] for r in results}
     return cols
+
+
+def cell_direction(cell: str, direction: str) -> str:
+    """A `code` case's own direction (its name ends in _up or _down), else the families' one."""
+    return cell.rsplit("_", 1)[1] if cell.startswith("code_") else direction
 
 
 def write_cell(out: Path, cell: str, records: list[dict], args) -> None:
     records = sorted(records, key=lambda r: r["start"])
     result = {"cell": cell, **s2s.summarise(records), "policy": str(args.policy),
-              "robot": args.robot or "go2_full.xml (ours)", "direction": args.direction,
+              "robot": args.robot or "go2_full.xml (ours)",
+              "direction": cell_direction(cell, args.direction),
               "latency_ms": args.latency_ms,
               "noise": args.noise, "push": args.push, "episode_s": args.episode_s,
               "seed": args.seed, "resolution": args.resolution, "records": records}
@@ -240,6 +249,9 @@ def main(argv: list[str] | None = None) -> None:
                    "--out) and stop: a GPU host runs them, then sim2sim on its CPUs")
     p.add_argument("--mjx-json", default=None, help="MJX success from an earlier evaluation")
     p.add_argument("--mjx-policy", default="stage2_u", help="its policy name")
+    p.add_argument("--mjx-code", action="append", default=[], metavar="NAME=FILE",
+                   help="an MJX column of the code cases from a code_suite.py file (its own "
+                   "1000 robots per case, not these starts)")
     p.add_argument("--force", action="store_true", help="redo cells already written")
     args = p.parse_args(argv)
     out = args.out
