@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
-# Issue 24's video: the generalist (experiments/results/generalist/policy.npz) going up, then
+# Issue 24's video: a generalist (P, default experiments/results/generalist_d2/policy.npz, the
+# README's policy for building-code stairs; the first video, 2026-11-24, was generalist/) going up, then
 # down, the `code` suite's commercial U-shaped staircase (risers 17.8 cm, treads 27.9 cm, width
 # 1.12 m, left turn), exported to STL and played through `mjx-stairs play --mesh` (one robot,
 # seed 0, its first episode, tracking camera; no selection of episodes). Writes
 # docs/generalist_code_u.mp4 (up then down) and docs/generalist_code_u.png (four frames of
 # each). ~8 min per direction on a 2-core CPU (software rendering).
-#   bash experiments/generalist_video.sh            (JAX_PLATFORMS=cpu is set here)
+#   [P=experiments/results/NAME/policy.npz] bash experiments/generalist_video.sh
+#   (JAX_PLATFORMS=cpu is set here)
 set -euo pipefail
 export JAX_PLATFORMS=cpu
-PY=${PY:-.venv/bin/python}; TMP=$(mktemp -d); P=experiments/results/generalist/policy.npz
+PY=${PY:-.venv/bin/python}; TMP=$(mktemp -d); P=${P:-experiments/results/generalist_d2/policy.npz}
 "$PY" - "$TMP" <<'EOF'
 import sys
 from mjx_stairs.study import cases
@@ -35,7 +37,7 @@ frames() {  # frames DIR N1 N2 N3 N4: four frames (50 per second) side by side
   "$FF" -loglevel error -y -i "$TMP/$1.mp4" -frames:v 1 -vf \
     "select='eq(n\,$2)+eq(n\,$3)+eq(n\,$4)+eq(n\,$5)',scale=320:-1,tile=4x1" "$TMP/$1.png"
 }
-frames up 50 100 300 500; frames down 150 200 250 300  # where the tracking camera sees the robot
+frames up 100 300 550 790; frames down 150 200 250 300  # climbing, the landing, the top; going down
 "$FF" -loglevel error -y -i "$TMP/up.png" -i "$TMP/down.png" -filter_complex vstack \
   docs/generalist_code_u.png
 rm -rf "$TMP"
