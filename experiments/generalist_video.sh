@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Issue 24's video: a generalist (P, default experiments/results/generalist_d2/policy.npz, the
-# README's policy for building-code stairs; the first video, 2026-11-24, was generalist/) going up, then
-# down, the `code` suite's commercial U-shaped staircase (risers 17.8 cm, treads 27.9 cm, width
-# 1.12 m, left turn), exported to STL and played through `mjx-stairs play --mesh` (one robot,
-# seed 0, its first episode, tracking camera; no selection of episodes). Writes
+# README's policy for building-code stairs; the first video, 2026-11-24, was generalist/) going
+# up, then down, the `code` suite's commercial U-shaped staircase (risers 17.8 cm, treads
+# 27.9 cm, width 1.12 m, left turn), exported to STL and played through `mjx-stairs play --mesh`
+# (one robot, seed 0, its first episode, tracking camera; no selection of episodes). Writes
 # docs/generalist_code_u.mp4 (up then down) and docs/generalist_code_u.png (four frames of
 # each). ~8 min per direction on a 2-core CPU (software rendering).
 #   [P=experiments/results/NAME/policy.npz] bash experiments/generalist_video.sh

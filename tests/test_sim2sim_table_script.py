@@ -69,3 +69,6 @@ def test_a_code_suite_file_is_an_mjx_column_of_the_code_cases(tmp_path):
     assert table.cell_direction("code_residential_u_left_down", "up") == "down"
     assert table.cell_direction("code_commercial_straight_up", "down") == "up"
     assert table.cell_direction("straight_test_down_L2", "down") == "down"
+    args.mjx_code = [str(src)]  # no NAME=
+    with pytest.raises(SystemExit, match="expected NAME=FILE"):
+        table.mjx_columns(args, tmp_path)

@@ -176,6 +176,9 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
         cols["MJX"] = {cell_name(c["family"], c["schedule"], c["level"] - 1): s
                        for c, s in zip(r["cells"], r["success"], strict=True)}
     for name, _, path in (c.partition("=") for c in args.mjx_code):  # code_suite.py's files
+        if not (name and Path(path).is_file()):
+            raise SystemExit(f"--mjx-code {name}={path}: expected NAME=FILE of an existing "
+                             "code_suite.py result")
         results = json.loads(Path(path).read_text())["results"]
         cols[name] = {r["name"]: r["success"] for r in results}
     return cols
