@@ -7,7 +7,8 @@ its tile is a random column of its family at its level, so an atlas built with b
 The rule (paper; thresholds from the authors' code): when a robot's episode ends it moves up one
 level if it ended within `up_distance` of the goal (planar) and within `up_yaw` of the goal's
 heading, otherwise down one level. A robot that clears the top level is sent to a random level,
-and with `random_level_prob` any robot is, at that rate per episode.
+and with `random_level_prob` any robot is, at that rate per episode (to a level from
+`random_level_low` up).
 Pure jnp functions on per-robot scalars, vmapped by the env with the robots.
 """
 
@@ -35,6 +36,9 @@ class CurriculumConfig:
     # Robots then train on levels above the one where half of them succeed, and walk down from
     # there one level per failed episode.
     random_level_prob: float = 0.0
+    # the lowest level such a jump lands on (0: any level; e.g. 7: only the levels 7-9 of ten, the
+    # building family's code-riser bands). A level above the atlas's top means its top level.
+    random_level_low: int = 0
     # how often each family of the atlas is drawn, in its order (() = uniformly)
     family_weights: tuple[float, ...] = ()
 
@@ -42,6 +46,9 @@ class CurriculumConfig:
         if not 0.0 <= self.random_level_prob <= 1.0:
             raise ConfigError("config key 'env.curriculum.random_level_prob': must be in [0, 1], "
                               f"got {self.random_level_prob}")
+        if self.random_level_low < 0:
+            raise ConfigError("config key 'env.curriculum.random_level_low': must be >= 0, got "
+                              f"{self.random_level_low}")
         w = self.family_weights
         if w and (min(w) < 0 or sum(w) <= 0):
             raise ConfigError("config key 'env.curriculum.family_weights': must be >= 0 with a "
@@ -107,7 +114,8 @@ def next_level(
     if config.random_level_prob > 0.0:  # other keys: with 0 the stream is the rule's alone
         k_jump, k_level = jax.random.split(jax.random.fold_in(rng, 1))
         jump = jax.random.uniform(k_jump) < config.random_level_prob
-        new = jnp.where(jump, jax.random.randint(k_level, (), 0, num_levels), new)
+        low = min(config.random_level_low, num_levels - 1)
+        new = jnp.where(jump, jax.random.randint(k_level, (), low, num_levels), new)
     return new.astype(jnp.int32)
 
 

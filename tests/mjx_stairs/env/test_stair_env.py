@@ -305,6 +305,16 @@ def test_curriculum_random_level_prob_jumps_that_often_and_zero_is_the_rule():
     assert np.abs(np.bincount(every, minlength=n) / len(every) - 0.1).max() < 0.03
     with pytest.raises(ConfigError, match="env.curriculum.random_level_prob"):
         cur.CurriculumConfig(random_level_prob=1.5)
+    # jumps from a low level land on levels 7-9 only, uniformly; the rule's own moves unchanged
+    high = step(dataclasses.replace(rule, random_level_prob=1.0, random_level_low=7), 2, False)
+    assert set(high.tolist()) == {7, 8, 9}
+    assert np.abs(np.bincount(high, minlength=n)[7:] / len(high) - 1 / 3).max() < 0.04
+    some = step(dataclasses.replace(rule, random_level_prob=0.25, random_level_low=7), 2, False)
+    assert set(some.tolist()) == {1, 7, 8, 9}
+    top = step(dataclasses.replace(rule, random_level_prob=1.0, random_level_low=20), 2, False)
+    assert np.all(top == n - 1)  # above the atlas: its top level
+    with pytest.raises(ConfigError, match="env.curriculum.random_level_low"):
+        cur.CurriculumConfig(random_level_low=-1)
 
 
 def test_tile_table_keeps_family_columns():
