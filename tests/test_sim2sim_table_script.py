@@ -72,3 +72,16 @@ def test_a_code_suite_file_is_an_mjx_column_of_the_code_cases(tmp_path):
     args.mjx_code = [str(src)]  # no NAME=
     with pytest.raises(SystemExit, match="expected NAME=FILE"):
         table.mjx_columns(args, tmp_path)
+
+
+def test_cases_picks_code_cases_and_an_unknown_one_is_refused(tmp_path):
+    onnx = ROOT / "experiments/results/generalist_d2/policy.onnx"
+    args = table.main.__globals__["argparse"].Namespace(
+        episode_s=1.0, latency_ms=0.0, noise=False, push=False, seed=0, chunk=2, episodes=3,
+        cells=["code"], cases=["code_commercial_straight_down"], resolution=0.025, robot=None)
+    tasks = table.tasks_for(args, onnx, set())
+    assert {t[0] for t in tasks} == {"code_commercial_straight_down"}
+    assert sum(len(t[2]) for t in tasks) == 3  # the episodes, in chunks of 2
+    assert table.tasks_for(args, onnx, {"code_commercial_straight_down"}) == []
+    with pytest.raises(SystemExit, match="--cases: no case 'code_nowhere'"):
+        table.main(["--out", str(tmp_path), "--cells", "code", "--cases", "code_nowhere"])

@@ -139,7 +139,7 @@ def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
 
         c = ct.load_contract(onnx)
         for case in load_suite("code"):
-            if case.name in done:
+            if case.name in done or (args.cases and case.name not in args.cases):
                 continue
             spec = ("case", "code", case.name, args.resolution)
             chunks(case.name, spec, s2s.starts(course_of(spec), c, args.episodes, args.seed))
@@ -234,6 +234,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="the families' staircases walked up or down")
     p.add_argument("--levels", type=lambda v: [int(x) - 1 for x in v.split(",")], default=[],
                    help="1-based test levels, e.g. 4,5,6 (default all)")
+    p.add_argument("--cases", nargs="+", default=[],
+                   help="of the code suite only these cases (default all 24)")
     p.add_argument("--episodes", type=int, default=200, help="episodes per cell")
     p.add_argument("--workers", type=int, default=16)
     p.add_argument("--chunk", type=int, default=10, help="episodes per task")
@@ -257,6 +259,14 @@ def main(argv: list[str] | None = None) -> None:
                    "1000 robots per case, not these starts)")
     p.add_argument("--force", action="store_true", help="redo cells already written")
     args = p.parse_args(argv)
+    if args.cases:
+        from terrains.suites import find_case
+
+        for name in args.cases:
+            try:
+                find_case("code", name)
+            except ValueError as e:  # an unknown case: one line naming the known ones
+                raise SystemExit(f"--cases: {e}") from None
     out = args.out
     (out / "cells").mkdir(parents=True, exist_ok=True)
     onnx = out / "policy.onnx"
