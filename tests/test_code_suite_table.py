@@ -29,3 +29,20 @@ def test_the_offset_columns_come_from_the_offset_step_where_it_ran(tmp_path):
             if line.startswith("| a ") or line.startswith("| b ")}
     assert rows["a"] == "| a | 99.0 | 98.0 | - | 10.0 | 90.0 |"  # mesh step's, no re-measure
     assert rows["b"] == "| b | 99.0 | 98.0 | - | 78.4 | 96.8 |"
+
+
+def test_only_the_policies_of_the_chosen_steps_must_exist(tmp_path, monkeypatch):
+    """A default --policies entry whose file is missing stops a suite step, not an offset or
+    table step (a call that moved a results folder out of the tree ran no offset step for it)."""
+    monkeypatch.setitem(code_suite.POLICIES, "gone", tmp_path / "gone.npz")
+    run = [__file__, str(tmp_path / "out"), "--policies", "gone", "--mesh-policies", "gone"]
+    monkeypatch.setattr("sys.argv", [*run, "--steps", "table"])
+    code_suite.main()  # nothing to check: no suite, mesh or offset step
+    for steps in ("suite", "offset"):
+        monkeypatch.setattr("sys.argv", [*run, "--steps", steps])
+        try:
+            code_suite.main()
+        except SystemExit as e:
+            assert str(e) == "code_suite: no policy file for gone"
+        else:
+            raise AssertionError(f"--steps {steps} ran without its policy file")
