@@ -7,6 +7,8 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 spec = importlib.util.spec_from_file_location("code_suite", ROOT / "experiments/gpu/code_suite.py")
 code_suite = importlib.util.module_from_spec(spec)
@@ -40,9 +42,6 @@ def test_only_the_policies_of_the_chosen_steps_must_exist(tmp_path, monkeypatch)
     code_suite.main()  # nothing to check: no suite, mesh or offset step
     for steps in ("suite", "offset"):
         monkeypatch.setattr("sys.argv", [*run, "--steps", steps])
-        try:
+        with pytest.raises(SystemExit) as e:
             code_suite.main()
-        except SystemExit as e:
-            assert str(e) == "code_suite: no policy file for gone"
-        else:
-            raise AssertionError(f"--steps {steps} ran without its policy file")
+        assert str(e.value) == "code_suite: no policy file for gone"
