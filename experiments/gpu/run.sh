@@ -234,7 +234,8 @@ paper_models() {  # paper_models FILE: the [models] of the paper-setting transfe
 # EVAL_FAMILIES (a+b, default u_shaped), EVAL_DIRECTION (up), 1000 robots, the evaluation
 # physics, into $OUT/eval/<name>[_<direction>][_<EVAL_TAG>]/; EVAL_ENV (a+b of key=value under
 # [env], e.g. robot.joint_damping=2.0+robot.implicit_damping=true) changes the robot judged
-eval_names() {
+eval_names() {  # one folder per family set: two groups judging one policy on different families
+  # (gpu0 u_shaped, gpu1 spiral) wrote one folder, the second's results over the first's (2026-11-28)
   local name p env=()
   [ -n "${EVAL_ENV:-}" ] && env=(--env ${EVAL_ENV//+/ })
   for name in ${EVAL_NAMES//+/ }; do
@@ -242,7 +243,8 @@ eval_names() {
     [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
     timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
       --family ${EVAL_FAMILIES//+/ } --direction "${EVAL_DIRECTION:-up}" "${env[@]}" \
-      --out "$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}" 2>&1 \
+      --out "$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}/${EVAL_FAMILIES//+/-}" \
+      2>&1 \
       | grep -v warp
   done
 }
