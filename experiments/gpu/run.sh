@@ -232,10 +232,12 @@ paper_models() {  # paper_models FILE: the [models] of the paper-setting transfe
 
 # an evaluation of named policies (EVAL_NAMES a+b: trained here, carried, else committed) on
 # EVAL_FAMILIES (a+b, default u_shaped), EVAL_DIRECTION (up), 1000 robots, the evaluation
-# physics, into $OUT/eval/<name>[_<direction>][_<EVAL_TAG>]/; EVAL_ENV (a+b of key=value under
-# [env], e.g. robot.joint_damping=2.0+robot.implicit_damping=true) changes the robot judged
-eval_names() {  # one folder per family set: two groups judging one policy on different families
-  # (gpu0 u_shaped, gpu1 spiral) wrote one folder, the second's results over the first's (2026-11-28)
+# physics, into $OUT/eval/<name>[_<direction>][_<EVAL_TAG>]/<families joined by ->/ (one folder
+# per family set: two groups judging one policy on different families, gpu0 u_shaped and gpu1
+# spiral, wrote one folder, the second's results over the first's, 2026-11-28); EVAL_ENV (a+b of
+# key=value under [env], e.g. robot.joint_damping=2.0+robot.implicit_damping=true) changes the
+# robot judged
+eval_names() {
   local name p env=()
   [ -n "${EVAL_ENV:-}" ] && env=(--env ${EVAL_ENV//+/ })
   for name in ${EVAL_NAMES//+/ }; do
