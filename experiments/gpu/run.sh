@@ -238,16 +238,15 @@ paper_models() {  # paper_models FILE: the [models] of the paper-setting transfe
 # key=value under [env], e.g. robot.joint_damping=2.0+robot.implicit_damping=true) changes the
 # robot judged
 eval_names() {
-  local name p env=()
+  local name p env=() out
   [ -n "${EVAL_ENV:-}" ] && env=(--env ${EVAL_ENV//+/ })
   for name in ${EVAL_NAMES//+/ }; do
     p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
+    out=$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}/${EVAL_FAMILIES//+/-}
     [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
     timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
       --family ${EVAL_FAMILIES//+/ } --direction "${EVAL_DIRECTION:-up}" "${env[@]}" \
-      --out "$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}/${EVAL_FAMILIES//+/-}" \
-      2>&1 \
-      | grep -v warp
+      --out "$out" 2>&1 | grep -v warp
   done
 }
 
