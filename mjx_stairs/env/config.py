@@ -177,6 +177,12 @@ class EnvConfig:
     # use the final goal.
     goal_mode: Literal["final", "waypoint"] = "final"
     waypoint_lookahead_m: float = 1.0
+    # The waypoint's yaw: "ahead", the centre-line's heading at the waypoint (every policy to
+    # 2026-11-28); "here", its heading at the robot's own projection, so that a corner ahead turns
+    # the yaw only once the robot reaches it. Why (docs/diagnosis_code_suite.md, session 24): on
+    # the code suite's 1.12 m landings the 1 m waypoint passes the corner 1.6 treads before the
+    # flight's top, its yaw turns by 90 degrees, and the robot turns on the steep flight and falls.
+    waypoint_heading: Literal["ahead", "here"] = "ahead"
     # Policy steps of history in the observation (env.observation.history_terms: the joint
     # positions and actions of that many earlier steps); 0: one frame, as every published policy.
     obs_history: int = 0
@@ -198,6 +204,8 @@ class EnvConfig:
              f"false unless env.robot.solver_iterations >= {rb.IMPLICIT_MIN_ITERATIONS} (it has "
              f"{self.robot.solver_iterations}: the joints run away, sim.robot."
              "IMPLICIT_MIN_ITERATIONS; physics 'lean_implicit' is lean with 4)"),
+            ("waypoint_heading", self.waypoint_heading,
+             self.waypoint_heading in ("ahead", "here"), "'ahead' or 'here'"),
             ("route.perturb_prob", self.route.perturb_prob,
              self.route.perturb_prob == 0 or self.goal_mode == "waypoint",
              "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)"),

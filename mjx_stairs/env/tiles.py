@@ -51,27 +51,38 @@ class TileTables:
         return np.asarray(self.line[tile])
 
     def waypoint(self, pos: jnp.ndarray, tile: jnp.ndarray, lookahead: float,
-                 arc: jnp.ndarray | None = None) -> jnp.ndarray:
+                 arc: jnp.ndarray | None = None, heading_here: bool = False) -> jnp.ndarray:
         """(x, y, z, yaw): the point `lookahead` m further along the tile's centre-line than
         pos's projection on it (arc length `arc`, when the caller has it), with the line's
-        heading there; the tile's goal once that is nearer along the line than `lookahead`."""
+        heading there (`heading_here`: at the projection); the tile's goal once that is nearer
+        along the line than `lookahead`."""
         return waypoint_on(pos, self.line3[tile], self.line_cum[tile], self.goal[tile],
-                           lookahead, arc)
+                           lookahead, arc, heading_here)
+
+
+def _segment(cum: jnp.ndarray, s: jnp.ndarray) -> jnp.ndarray:
+    """The index of the segment holding arc length s: the last i with cum[i] <= s, clipped to
+    [0, K - 2] (a repeated point's zero-length segment is skipped)."""
+    return jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
 
 
 def waypoint_on(pos: jnp.ndarray, line3: jnp.ndarray, cum: jnp.ndarray, goal: jnp.ndarray,
-                lookahead: float, arc: jnp.ndarray | None = None) -> jnp.ndarray:
+                lookahead: float, arc: jnp.ndarray | None = None,
+                heading_here: bool = False) -> jnp.ndarray:
     """(x, y, z, yaw): the waypoint of TileTables.waypoint on any route, line3 [K, 3] with arc
     lengths cum [K] (its length cum[-1]), ending at goal [4]."""
     total = cum[-1]
     if arc is None:
         _, arc = rw.centreline_geometry(pos[:2], line3[:, :2], cum)
     s = arc + lookahead
-    i = jnp.clip(jnp.searchsorted(cum, s, side="right") - 1, 0, cum.shape[0] - 2)
+    i = _segment(cum, s)
     seg = line3[i + 1] - line3[i]
     seg_len = cum[i + 1] - cum[i]
     t = jnp.clip((s - cum[i]) / jnp.maximum(seg_len, 1e-6), 0.0, 1.0)
     point = line3[i] + t * seg
+    if heading_here:  # the heading of the segment the robot's projection is on
+        j = _segment(cum, arc)
+        seg = line3[j + 1] - line3[j]
     yaw = jnp.arctan2(seg[1], seg[0])
     waypoint = jnp.concatenate([point, yaw[None]])
     return jnp.where(s >= total, goal, waypoint)

@@ -56,6 +56,7 @@ class Contract:
     lookahead: float
     evaluation: dict[str, Any]
     history: int = 0  # policy steps of joint positions and actions the observation keeps
+    heading: str = "ahead"  # the waypoint's yaw: the route's heading at it, or at the robot
 
 
 def sidecar_path(onnx_path: str | os.PathLike) -> Path:
@@ -132,8 +133,16 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         hm_size=n, hm_offset=float(hm["offset_m"]), hm_clip=float(hm["clip_m"]),
         hm_xy=np.stack([gx.ravel(), gy.ravel()], -1), goal_mode=str(goal["mode"]),
         lookahead=float(goal["lookahead_m"] or 0.0), evaluation=dict(raw.get("evaluation", {})),
-        history=history,
+        history=history, heading=_heading(goal, w),
     )
+
+
+def _heading(goal: dict, where: str) -> str:
+    """The goal section's waypoint heading rule ('ahead' where a sidecar predates it)."""
+    heading = str(goal.get("heading", "ahead"))
+    if heading not in ("ahead", "here"):
+        raise ContractError(f"{where}: goal heading must be 'ahead' or 'here', got {heading!r}")
+    return heading
 
 
 # ----------------------------------------------------------------------------- the policy
@@ -242,13 +251,18 @@ def goal_target(c: Contract, xy: np.ndarray, final_goal: np.ndarray,
     len2 = np.sum(ab * ab, -1)
     t = np.clip(np.sum((xy[:2] - a) * ab, -1) / np.maximum(len2, 1e-12), 0.0, 1.0)
     i = int(np.argmin(np.linalg.norm(xy[:2] - (a + t[:, None] * ab), axis=-1)))
-    s = cum[i] + t[i] * np.sqrt(len2[i]) + c.lookahead
+    arc = cum[i] + t[i] * np.sqrt(len2[i])
+    s = arc + c.lookahead
     if s >= cum[-1]:
         return final_goal
     j = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2))
     f = np.clip((s - cum[j]) / max(cum[j + 1] - cum[j], 1e-6), 0.0, 1.0)
     d = line[j + 1] - line[j]
-    return np.concatenate([line[j] + f * d, [np.arctan2(d[1], d[0])]])
+    point = line[j] + f * d
+    if getattr(c, "heading", "ahead") == "here":  # the heading where the robot's projection is
+        k = int(np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(cum) - 2))
+        d = line[k + 1] - line[k]
+    return np.concatenate([point, [np.arctan2(d[1], d[0])]])
 
 
 def observation(c: Contract, m: Measurement) -> np.ndarray:

@@ -54,9 +54,10 @@ def _clip_ranges(cfg: EnvConfig) -> dict[str, list[float] | None]:
 def _goal_description(cfg: EnvConfig, desc: str) -> str:
     if cfg.goal_mode != "waypoint":
         return desc
+    where = "at the base's projection" if cfg.waypoint_heading == "here" else "there"
     return (f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
             "further along the stair centre-line than the base's projection on it, with the "
-            "centre-line's heading there as its yaw, and the final goal (position and yaw) once "
+            f"centre-line's heading {where} as its yaw, and the final goal (position and yaw) once "
             f"that is nearer than {cfg.waypoint_lookahead_m:g} m along the line (see 'goal')")
 
 
@@ -143,6 +144,7 @@ def _goal(cfg: EnvConfig) -> dict[str, Any]:
     return {
         "mode": cfg.goal_mode,
         "lookahead_m": cfg.waypoint_lookahead_m if cfg.goal_mode == "waypoint" else None,
+        "heading": cfg.waypoint_heading,
         "final_goal": "(x, y, z, yaw), world frame: the goal point on the top (or bottom) "
                       "landing and the heading to arrive with",
         "route": "a polyline [K, 3] (x, y, z) in the world frame from the start to the final "
@@ -153,7 +155,10 @@ def _goal(cfg: EnvConfig) -> dict[str, Any]:
                     "lookahead_m; if s >= the route's length the target is the final goal; "
                     "else i = clip(last index with cum[i] <= s, 0, K - 2), the point "
                     "route[i] + clip((s - cum[i]) / (cum[i+1] - cum[i]), 0, 1) (route[i+1] - "
-                    "route[i]) (x, y, z) and the segment's heading atan2(dy, dx) as its yaw",
+                    "route[i]) (x, y, z), and as its yaw the heading atan2(dy, dx) of segment "
+                    "i ('heading' = 'ahead', or absent) or of segment clip(last index with "
+                    "cum[k] <= arc, 0, K - 2), where the base's projection is ('heading' = "
+                    "'here')",
         "used_as": "'final': the observation's goal is the final goal; 'waypoint': it is the "
                    "waypoint, recomputed every control step",
     }

@@ -259,6 +259,32 @@ def test_sidecar_says_what_the_goal_input_is(policy, exported):
     side = export.sidecar(policy._replace(metadata=meta))
     (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
     assert "waypoint" in goal["description"] and "1.5 m" in goal["description"]
+    assert side["goal"]["heading"] == "ahead" and "heading there" in goal["description"]
+    meta["config"]["env"].update(waypoint_heading="here")
+    side = export.sidecar(policy._replace(metadata=meta))
+    (goal,) = [e for e in side["observation"]["layout"] if e["name"] == "goal"]
+    assert side["goal"]["heading"] == "here" and "projection as its yaw" in goal["description"]
+
+
+def test_the_contract_reads_the_waypoint_heading_rule(exported, tmp_path):
+    """goal.heading: 'ahead' where a sidecar predates it, 'here' read back, anything else a
+    one-line error naming it."""
+    from mjx_stairs.tools import contract as ct
+
+    path, side = exported
+    for heading, want in ((None, "ahead"), ("here", "here"), ("behind", None)):
+        s = copy.deepcopy(side)
+        s["goal"].pop("heading")
+        if heading is not None:
+            s["goal"]["heading"] = heading
+        bad = tmp_path / f"p_{heading}.onnx"
+        bad.write_bytes(path.read_bytes())
+        ct.sidecar_path(bad).write_text(json.dumps(s))
+        if want is None:
+            with pytest.raises(ct.ContractError, match="goal heading must be 'ahead' or 'here'"):
+                ct.load_contract(bad)
+        else:
+            assert ct.load_contract(bad).heading == want
 
 
 def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
@@ -296,6 +322,7 @@ def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
     np.testing.assert_allclose(np.diff(hm["x_m"]), hm["spacing_m"])
     assert hm["x_m"][0] == -2.0 and hm["y_m"][-1] == 2.0 and len(hm["y_m"]) == 21
     assert side["goal"]["mode"] == cfg.goal_mode and "waypoint" in side["goal"]
+    assert side["goal"]["heading"] == "ahead" and c.heading == "ahead"
     ev = side["evaluation"]
     assert (ev["success_distance_m"], ev["success_speed_m_s"], ev["success_hold_s"]) == (
         cfg.success_distance, cfg.success_speed, cfg.success_hold_s)
