@@ -40,6 +40,8 @@
 # the next command on the same warm machine, run the same step again: it resumes from the state
 # and whole curve it left in $KEEP/<name>/ (FRESH=1 starts over); on a fresh machine, copy that
 # state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl.
+# The tracked tree alone passed the 64 MiB a call carries (67.7 MB, 2026-11-28): before a call,
+# experiments/gpu/slim_tree.sh out [RUN ...] holds docs/ and the results no step needs outside it.
 # Stage 2 starts from experiments/results/stage1/policy.npz: commit the stage-1 policy there
 # first. TRAIN_ARGS (key=value ...) is added to every training command. The CPU
 # steps start a background job and return at once; pack (or the end of the script) waits for them
