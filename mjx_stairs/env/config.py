@@ -182,6 +182,8 @@ class EnvConfig:
     # the yaw only once the robot reaches it. Why (docs/diagnosis_code_suite.md, session 24): on
     # the code suite's 1.12 m landings the 1 m waypoint passes the corner 1.6 treads before the
     # flight's top, its yaw turns by 90 degrees, and the robot turns on the steep flight and falls.
+    # A training choice, not an evaluation setting: a policy trained "ahead" and run "here" climbs
+    # those flights but loses the spiral and the winder, which it steers round by the yaw ahead.
     waypoint_heading: Literal["ahead", "here"] = "ahead"
     # Policy steps of history in the observation (env.observation.history_terms: the joint
     # positions and actions of that many earlier steps); 0: one frame, as every published policy.
