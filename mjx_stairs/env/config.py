@@ -182,9 +182,12 @@ class EnvConfig:
     # the yaw only once the robot reaches it. Why (docs/diagnosis_code_suite.md, session 24): on
     # the code suite's 1.12 m landings the 1 m waypoint passes the corner 1.6 treads before the
     # flight's top, its yaw turns by 90 degrees, and the robot turns on the steep flight and falls.
-    # A training choice, not an evaluation setting: a policy trained "ahead" and run "here" climbs
-    # those flights but loses the spiral and the winder, which it steers round by the yaw ahead.
-    waypoint_heading: Literal["ahead", "here"] = "ahead"
+    # "chord": the heading from the robot's projection to the waypoint, which turns smoothly
+    # through a corner and leads the robot round a curve by half the lookahead. A training choice,
+    # not an evaluation setting (a policy is run with the rule it trained with); as a diagnostic, a
+    # policy trained "ahead" and run "here" climbed those flights but lost the spiral and the
+    # winder, run "chord" it was at or above its own rule on all 12 commercial cases.
+    waypoint_heading: Literal["ahead", "here", "chord"] = "ahead"
     # Policy steps of history in the observation (env.observation.history_terms: the joint
     # positions and actions of that many earlier steps); 0: one frame, as every published policy.
     obs_history: int = 0
@@ -207,7 +210,7 @@ class EnvConfig:
              f"{self.robot.solver_iterations}: the joints run away, sim.robot."
              "IMPLICIT_MIN_ITERATIONS; physics 'lean_implicit' is lean with 4)"),
             ("waypoint_heading", self.waypoint_heading,
-             self.waypoint_heading in ("ahead", "here"), "'ahead' or 'here'"),
+             self.waypoint_heading in ("ahead", "here", "chord"), "'ahead', 'here' or 'chord'"),
             ("route.perturb_prob", self.route.perturb_prob,
              self.route.perturb_prob == 0 or self.goal_mode == "waypoint",
              "0 unless env.goal_mode = 'waypoint' (the route is what the waypoint follows)"),

@@ -333,11 +333,11 @@ class StairEnv(Env):
         `arc` is along the tile's centre-line)."""
         if self.config.goal_mode == "final":
             return self.tiles.goal[tile] if info is None else goals.goal_of(info, self.tiles)
-        here = self.config.waypoint_heading == "here"
+        heading = self.config.waypoint_heading
         if info is not None and "route" in info:
             return waypoint_on(pos, info["route"], info["route_cum"], self.tiles.goal[tile],
-                               self.config.waypoint_lookahead_m, heading_here=here)
-        return self.tiles.waypoint(pos, tile, self.config.waypoint_lookahead_m, arc, here)
+                               self.config.waypoint_lookahead_m, heading=heading)
+        return self.tiles.waypoint(pos, tile, self.config.waypoint_lookahead_m, arc, heading)
 
     def observe(self, qpos: jnp.ndarray, qvel: jnp.ndarray, info: dict,
                 rng: jax.Array | None = None, arc: jnp.ndarray | None = None,

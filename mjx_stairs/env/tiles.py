@@ -51,13 +51,13 @@ class TileTables:
         return np.asarray(self.line[tile])
 
     def waypoint(self, pos: jnp.ndarray, tile: jnp.ndarray, lookahead: float,
-                 arc: jnp.ndarray | None = None, heading_here: bool = False) -> jnp.ndarray:
+                 arc: jnp.ndarray | None = None, heading: str = "ahead") -> jnp.ndarray:
         """(x, y, z, yaw): the point `lookahead` m further along the tile's centre-line than
         pos's projection on it (arc length `arc`, when the caller has it), with the line's
-        heading there (`heading_here`: at the projection); the tile's goal once that is nearer
-        along the line than `lookahead`."""
+        heading there (`heading` "ahead"; "here": at the projection; "chord": from the projection
+        to the point); the tile's goal once that is nearer along the line than `lookahead`."""
         return waypoint_on(pos, self.line3[tile], self.line_cum[tile], self.goal[tile],
-                           lookahead, arc, heading_here)
+                           lookahead, arc, heading)
 
 
 def _segment(cum: jnp.ndarray, s: jnp.ndarray) -> jnp.ndarray:
@@ -68,7 +68,7 @@ def _segment(cum: jnp.ndarray, s: jnp.ndarray) -> jnp.ndarray:
 
 def waypoint_on(pos: jnp.ndarray, line3: jnp.ndarray, cum: jnp.ndarray, goal: jnp.ndarray,
                 lookahead: float, arc: jnp.ndarray | None = None,
-                heading_here: bool = False) -> jnp.ndarray:
+                heading: str = "ahead") -> jnp.ndarray:
     """(x, y, z, yaw): the waypoint of TileTables.waypoint on any route, line3 [K, 3] with arc
     lengths cum [K] (its length cum[-1]), ending at goal [4]."""
     total = cum[-1]
@@ -80,9 +80,13 @@ def waypoint_on(pos: jnp.ndarray, line3: jnp.ndarray, cum: jnp.ndarray, goal: jn
     seg_len = cum[i + 1] - cum[i]
     t = jnp.clip((s - cum[i]) / jnp.maximum(seg_len, 1e-6), 0.0, 1.0)
     point = line3[i] + t * seg
-    if heading_here:  # the heading of the segment the robot's projection is on
+    if heading != "ahead":  # from the segment the robot's projection is on
         j = _segment(cum, arc)
-        seg = line3[j + 1] - line3[j]
+        here = line3[j + 1] - line3[j]
+        if heading == "chord":  # the projection itself, to the point
+            f = jnp.clip((arc - cum[j]) / jnp.maximum(cum[j + 1] - cum[j], 1e-6), 0.0, 1.0)
+            here = point - (line3[j] + f * here)
+        seg = here
     yaw = jnp.arctan2(seg[1], seg[0])
     waypoint = jnp.concatenate([point, yaw[None]])
     return jnp.where(s >= total, goal, waypoint)

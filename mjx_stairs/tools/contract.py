@@ -56,7 +56,8 @@ class Contract:
     lookahead: float
     evaluation: dict[str, Any]
     history: int = 0  # policy steps of joint positions and actions the observation keeps
-    heading: str = "ahead"  # the waypoint's yaw: the route's heading at it, or at the robot
+    heading: str = "ahead"  # the waypoint's yaw: the route's heading at it ("ahead"), at the
+    # robot's projection ("here"), or from the projection to the waypoint ("chord")
 
 
 def sidecar_path(onnx_path: str | os.PathLike) -> Path:
@@ -140,8 +141,9 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
 def _heading(goal: dict, where: str) -> str:
     """The goal section's waypoint heading rule ('ahead' where a sidecar predates it)."""
     heading = str(goal.get("heading", "ahead"))
-    if heading not in ("ahead", "here"):
-        raise ContractError(f"{where}: goal heading must be 'ahead' or 'here', got {heading!r}")
+    if heading not in ("ahead", "here", "chord"):
+        raise ContractError(f"{where}: goal heading must be 'ahead', 'here' or 'chord', got "
+                            f"{heading!r}")
     return heading
 
 
@@ -259,9 +261,13 @@ def goal_target(c: Contract, xy: np.ndarray, final_goal: np.ndarray,
     f = np.clip((s - cum[j]) / max(cum[j + 1] - cum[j], 1e-6), 0.0, 1.0)
     d = line[j + 1] - line[j]
     point = line[j] + f * d
-    if getattr(c, "heading", "ahead") == "here":  # the heading where the robot's projection is
+    heading = getattr(c, "heading", "ahead")
+    if heading != "ahead":  # from the segment where the robot's projection is
         k = int(np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(cum) - 2))
         d = line[k + 1] - line[k]
+        if heading == "chord":  # from the projection to the point
+            g = np.clip((arc - cum[k]) / max(cum[k + 1] - cum[k], 1e-6), 0.0, 1.0)
+            d = point - (line[k] + g * d)
     return np.concatenate([point, [np.arctan2(d[1], d[0])]])
 
 

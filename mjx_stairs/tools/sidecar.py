@@ -54,7 +54,8 @@ def _clip_ranges(cfg: EnvConfig) -> dict[str, list[float] | None]:
 def _goal_description(cfg: EnvConfig, desc: str) -> str:
     if cfg.goal_mode != "waypoint":
         return desc
-    where = "at the base's projection" if cfg.waypoint_heading == "here" else "there"
+    where = {"here": "at the base's projection", "chord": "from the base's projection to it",
+             "ahead": "there"}[cfg.waypoint_heading]
     return (f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
             "further along the stair centre-line than the base's projection on it, with the "
             f"centre-line's heading {where} as its yaw, and the final goal (position and yaw) once "
@@ -156,9 +157,11 @@ def _goal(cfg: EnvConfig) -> dict[str, Any]:
                     "else i = clip(last index with cum[i] <= s, 0, K - 2), the point "
                     "route[i] + clip((s - cum[i]) / (cum[i+1] - cum[i]), 0, 1) (route[i+1] - "
                     "route[i]) (x, y, z), and as its yaw the heading atan2(dy, dx) of segment "
-                    "i ('heading' = 'ahead', or absent) or of segment clip(last index with "
+                    "i ('heading' = 'ahead', or absent), of segment k = clip(last index with "
                     "cum[k] <= arc, 0, K - 2), where the base's projection is ('heading' = "
-                    "'here')",
+                    "'here'), or of the point minus the projection route[k] + clip((arc - "
+                    "cum[k]) / (cum[k+1] - cum[k]), 0, 1) (route[k+1] - route[k]) ('heading' = "
+                    "'chord')",
         "used_as": "'final': the observation's goal is the final goal; 'waypoint': it is the "
                    "waypoint, recomputed every control step",
     }

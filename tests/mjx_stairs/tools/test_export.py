@@ -267,12 +267,12 @@ def test_sidecar_says_what_the_goal_input_is(policy, exported):
 
 
 def test_the_contract_reads_the_waypoint_heading_rule(exported, tmp_path):
-    """goal.heading: 'ahead' where a sidecar predates it, 'here' read back, anything else a
-    one-line error naming it."""
+    """goal.heading: 'ahead' where a sidecar predates it, 'here' and 'chord' read back, anything
+    else a one-line error naming it."""
     from mjx_stairs.tools import contract as ct
 
     path, side = exported
-    for heading, want in ((None, "ahead"), ("here", "here"), ("behind", None)):
+    for heading, want in ((None, "ahead"), ("here", "here"), ("chord", "chord"), ("behind", None)):
         s = copy.deepcopy(side)
         s["goal"].pop("heading")
         if heading is not None:
@@ -281,7 +281,7 @@ def test_the_contract_reads_the_waypoint_heading_rule(exported, tmp_path):
         bad.write_bytes(path.read_bytes())
         ct.sidecar_path(bad).write_text(json.dumps(s))
         if want is None:
-            with pytest.raises(ct.ContractError, match="goal heading must be 'ahead' or 'here'"):
+            with pytest.raises(ct.ContractError, match="goal heading must be 'ahead', 'here'"):
                 ct.load_contract(bad)
         else:
             assert ct.load_contract(bad).heading == want
