@@ -80,13 +80,12 @@ def waypoint_on(pos: jnp.ndarray, line3: jnp.ndarray, cum: jnp.ndarray, goal: jn
     seg_len = cum[i + 1] - cum[i]
     t = jnp.clip((s - cum[i]) / jnp.maximum(seg_len, 1e-6), 0.0, 1.0)
     point = line3[i] + t * seg
-    if heading != "ahead":  # from the segment the robot's projection is on
+    if heading != "ahead":  # the yaw from where the robot's projection is
         j = _segment(cum, arc)
-        here = line3[j + 1] - line3[j]
-        if heading == "chord":  # the projection itself, to the point
+        seg = line3[j + 1] - line3[j]  # "here": the segment it is on
+        if heading == "chord":  # from the projection itself to the point
             f = jnp.clip((arc - cum[j]) / jnp.maximum(cum[j + 1] - cum[j], 1e-6), 0.0, 1.0)
-            here = point - (line3[j] + f * here)
-        seg = here
+            seg = point - (line3[j] + f * seg)
     yaw = jnp.arctan2(seg[1], seg[0])
     waypoint = jnp.concatenate([point, yaw[None]])
     return jnp.where(s >= total, goal, waypoint)

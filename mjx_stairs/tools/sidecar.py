@@ -54,11 +54,12 @@ def _clip_ranges(cfg: EnvConfig) -> dict[str, list[float] | None]:
 def _goal_description(cfg: EnvConfig, desc: str) -> str:
     if cfg.goal_mode != "waypoint":
         return desc
-    where = {"here": "at the base's projection", "chord": "from the base's projection to it",
-             "ahead": "there"}[cfg.waypoint_heading]
+    yaw = {"ahead": "the centre-line's heading there",
+           "here": "the centre-line's heading at the base's projection",
+           "chord": "the heading from the base's projection to it"}[cfg.waypoint_heading]
     return (f"{desc}; the 'goal' is a waypoint: the point {cfg.waypoint_lookahead_m:g} m "
-            "further along the stair centre-line than the base's projection on it, with the "
-            f"centre-line's heading {where} as its yaw, and the final goal (position and yaw) once "
+            "further along the stair centre-line than the base's projection on it, with "
+            f"{yaw} as its yaw, and the final goal (position and yaw) once "
             f"that is nearer than {cfg.waypoint_lookahead_m:g} m along the line (see 'goal')")
 
 
