@@ -262,12 +262,11 @@ def goal_target(c: Contract, xy: np.ndarray, final_goal: np.ndarray,
     d = line[j + 1] - line[j]
     point = line[j] + f * d
     heading = getattr(c, "heading", "ahead")
-    if heading != "ahead":  # from the segment where the robot's projection is
+    if heading == "here":  # the segment the robot's projection is on (the env's index rule)
         k = int(np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(cum) - 2))
         d = line[k + 1] - line[k]
-        if heading == "chord":  # from the projection to the point
-            g = np.clip((arc - cum[k]) / max(cum[k + 1] - cum[k], 1e-6), 0.0, 1.0)
-            d = point - (line[k] + g * d)
+    elif heading == "chord":  # from the projection itself to the point
+        d = point[:2] - (a[i] + t[i] * ab[i])
     return np.concatenate([point, [np.arctan2(d[1], d[0])]])
 
 
