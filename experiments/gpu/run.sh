@@ -36,7 +36,8 @@
 # and delay-grid (issue 25: the damping x delay corner, a policy on the whole grid in MuJoCo
 # itself). Each training step stops and
 # checkpoints before DEADLINE_S seconds after the script started, and leaves in $OUT/<name>/ the
-# policy, metrics, run facts and a packed state.npz (~11 MB for 4096 robots). To continue a run in
+# policy, metrics, run facts and a packed state.npz (compressed, observation buffer zeroed: ~6 MB
+# for the generalist's 4096 robots). To continue a run in
 # the next command on the same warm machine, run the same step again: it resumes from the state
 # and whole curve it left in $KEEP/<name>/ (FRESH=1 starts over); on a fresh machine, copy that
 # state.npz and metrics.jsonl to .carry/<name>/ (ignored by git) and carry .carry with .whl.
@@ -104,6 +105,14 @@ train() {  # train NAME TOML [overrides...]; resumes from $KEEP/NAME/ (what an e
       && mv "$OUT/$name/m.tmp" "$OUT/$name/metrics.jsonl"
   fi
   mkdir -p "$KEEP/$name" && cp "$OUT/$name/state.npz" "$OUT/$name/metrics.jsonl" "$KEEP/$name/"
+  # The copy that comes back: compressed, its observation buffer zeroed (the generalist's 15.7 ->
+  # 5.8 MB), so that four runs' states fit the 64 MiB one call returns (with three or four runs
+  # one state was left out, 2026-11-28); carried back, the run's first step acts on zeros
+  python3 - "$OUT/$name/state.npz" <<'PY' || echo "== $name: state left uncompressed"
+import sys
+from mjx_stairs.rl.checkpoint import compact
+compact(sys.argv[1], sys.argv[1], zero=(".env_state['obs']",))
+PY
   python3 - "$OUT/$name/metrics.jsonl" <<'PY'
 import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]

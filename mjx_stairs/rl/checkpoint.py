@@ -58,10 +58,15 @@ def save(path: str | Path, tree: Any, metadata: dict[str, Any] | None = None) ->
     meta["__keys__"] = keys
     meta["__prng_keys__"] = key_impls
     arrays[META_KEY] = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    _write(path, arrays)
+
+
+def _write(path: Path, arrays: dict[str, np.ndarray], compressed: bool = False) -> None:
+    """Write ``arrays`` to ``path`` atomically: a temporary file beside it, fsynced, replaced."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
+            (np.savez_compressed if compressed else np.savez)(f, **arrays)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -99,6 +104,24 @@ def _open(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
 def load_metadata(path: str | Path) -> dict[str, Any]:
     """Only the metadata dict of a checkpoint."""
     return _open(Path(path))[1]
+
+
+def compact(src: str | Path, dst: str | Path, zero: tuple[str, ...] = ()) -> None:
+    """Rewrite checkpoint ``src`` to ``dst`` (may be ``src``) compressed, with the entries named
+    in ``zero`` (tree paths, e.g. ``".env_state['obs']"``) set to zeros of their shape and dtype;
+    metadata and every other entry unchanged, written atomically. For a training state that must
+    travel: its observation buffer is the largest entry and compresses worst (a resumed run's first
+    step then acts on a zero observation). A name in ``zero`` that is not an entry is an error."""
+    src, dst = Path(src), Path(dst)
+    arrays, meta = _open(src)
+    missing = [k for k in zero if k not in arrays]
+    if missing:
+        raise CheckpointError(f"{src}: no entry {missing[0]} to zero")
+    for k in zero:
+        arrays[k] = np.zeros_like(arrays[k])
+    arrays[META_KEY] = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    _write(dst, arrays, compressed=True)
 
 
 def load(path: str | Path, template: Any = None) -> tuple[Any, dict[str, Any]]:

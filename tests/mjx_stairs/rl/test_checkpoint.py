@@ -120,3 +120,22 @@ def test_listing_and_pruning(tmp_path):
     assert [p.name for p in checkpoint.list_checkpoints(tmp_path)] == [
         "state_00000010.npz", "state_00000030.npz"]
     assert checkpoint.latest_checkpoint(tmp_path / "none") is None
+
+
+def test_compact_zeroes_named_entries_and_keeps_the_rest(tmp_path):
+    """compact: compressed, the named entry zeroed, every other leaf and the metadata kept, and a
+    template load of the result still works; a name that is not an entry is a one-line error."""
+    big = np.tile(np.linspace(0.0, 1.0, 64, dtype=np.float32), (256, 1))
+    tree = {"obs": jnp.asarray(np.random.default_rng(0).normal(size=(256, 64)).astype(np.float32)),
+            "w": jnp.asarray(big), "key": jax.random.key(3)}
+    src, dst = tmp_path / "state.npz", tmp_path / "small" / "state.npz"
+    checkpoint.save(src, tree, {"iteration": 7})
+    checkpoint.compact(src, dst, zero=("['obs']",))
+    out, meta = checkpoint.load(dst, template=jax.eval_shape(lambda: tree))
+    assert meta["iteration"] == 7
+    assert np.all(out["obs"] == 0) and out["obs"].shape == (256, 64)
+    np.testing.assert_array_equal(out["w"], big)
+    assert jnp.array_equal(jax.random.key_data(out["key"]), jax.random.key_data(tree["key"]))
+    assert dst.stat().st_size < src.stat().st_size / 4
+    with pytest.raises(CheckpointError, match="no entry"):
+        checkpoint.compact(src, dst, zero=("['nope']",))
