@@ -29,12 +29,14 @@ from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
 import jax
+import numpy as np
 from jax.sharding import Mesh
 
 from mjx_stairs import atomic
 from mjx_stairs.rl import checkpoint, distributed, logger
 from mjx_stairs.rl.checkpointer import Checkpointer, load_state
 from mjx_stairs.rl.policy import config_dict
+from mjx_stairs.rl.sharding import put_global, to_host
 from mjx_stairs.rl.trainer import (
     Trainer,
     TrainState,
@@ -240,7 +242,7 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
             if not (run_dir / "config.json").exists():  # resumed into a new run dir
                 _write_config(run_dir, config)
         _say(f"resumed {path} at iteration {meta['iteration']}")
-        return state
+        return _reseeded(state, meta, config, trainer)
     state = trainer.init(jax.random.PRNGKey(config.train.seed))
     init_from = getattr(config, "init_from", "")
     if init_from:
@@ -250,6 +252,20 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     if main:
         _write_config(run_dir, config)
     return state
+
+
+def _reseeded(state: TrainState, meta: dict, config, trainer: Trainer) -> TrainState:
+    """A resumed state under the seed it was saved with: unchanged (the resume is exact). Under
+    another ``train.seed``: its key folded with the new seed, so that runs continued from one
+    state under two seeds draw two streams (replicates of a continuation, where a seed change
+    would otherwise change nothing but the run directory's name)."""
+    saved = meta.get("config", {}).get("train", {}).get("seed")
+    seed = config.train.seed
+    if saved is None or saved == seed:
+        return state
+    key = jax.random.fold_in(to_host(state.rng), seed)
+    _say(f"reseeded: the saved state's train.seed {saved} -> {seed}")
+    return state._replace(rng=put_global(np.asarray(key), trainer.sharding.rng))
 
 
 def _write_config(run_dir: Path, config) -> None:

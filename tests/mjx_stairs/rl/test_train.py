@@ -207,6 +207,22 @@ def test_run_then_resume_equals_one_run(tmp_path):
         runner.run(_run_cfg(tmp_path / "c"), env, resume=True)
 
 
+def test_resume_under_another_seed_draws_another_stream(tmp_path):
+    """A state resumed under the seed it was saved with continues exactly (above); under another
+    train.seed its key is folded with the new seed: the continuation differs, and is itself
+    reproducible."""
+    env = TOY
+    half = runner.run(_run_cfg(tmp_path / "a", total_iterations=2), env)
+    ck = half.run_dir / "checkpoints" / "state_00000002.npz"
+    same = runner.run(_run_cfg(tmp_path / "b"), env, run_dir=tmp_path / "b" / "r", resume=ck)
+    other = [runner.run(_run_cfg(tmp_path / f"c{i}", seed=8), env,
+                        run_dir=tmp_path / f"c{i}" / "r", resume=ck) for i in range(2)]
+    assert int(other[0].state.iteration) == 4
+    assert not _leaves_equal(same.state.params, other[0].state.params)
+    assert _leaves_equal(other[0].state, other[1].state)
+    assert not _leaves_equal(same.state.rng, other[0].state.rng)
+
+
 def test_packed_env_checkpoints_resume(tmp_path):
     env = TOY
     full = runner.run(_run_cfg(tmp_path / "a", checkpoint_env="packed"), env)
