@@ -473,7 +473,9 @@ run_step() {
       [ -n "${CODE_MESH:-}" ] && args+=(--mesh-policies "${CODE_MESH//+/,}")
       [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 experiments/gpu/code_suite.py "$OUT/code_suite" \
-        "${args[@]}" 2>&1 | grep -v warp ;;
+        "${args[@]}" 2>&1 | grep -v warp
+      # a suite cut at the deadline writes nothing (a 235 s command with the install: 2026-11-28)
+      [ "${PIPESTATUS[0]}" = 124 ] && echo "== code-suite: cut at the deadline, nothing written";;
     # issue 19 (docs/results.md section 5b): the published policies in MJX physics options on the
     # 36 fidelity cells, into the published folders under $OUT/ground_truth/. FIDELITY_OPTIONS
     # (default evaluation: mjx_eval/, section 1's evaluation-physics row and the fidelity table's
