@@ -57,8 +57,13 @@ def save(path: str | Path, tree: Any, metadata: dict[str, Any] | None = None) ->
     meta = dict(metadata or {})
     meta["__keys__"] = keys
     meta["__prng_keys__"] = key_impls
-    arrays[META_KEY] = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    arrays[META_KEY] = _meta_entry(meta)
     _write(path, arrays)
+
+
+def _meta_entry(meta: dict[str, Any]) -> np.ndarray:
+    """The metadata dict as the UTF-8 JSON bytes stored under META_KEY."""
+    return np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
 
 
 def _write(path: Path, arrays: dict[str, np.ndarray], compressed: bool = False) -> None:
@@ -119,7 +124,7 @@ def compact(src: str | Path, dst: str | Path, zero: tuple[str, ...] = ()) -> Non
         raise CheckpointError(f"{src}: no entry {missing[0]} to zero")
     for k in zero:
         arrays[k] = np.zeros_like(arrays[k])
-    arrays[META_KEY] = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    arrays[META_KEY] = _meta_entry(meta)
     dst.parent.mkdir(parents=True, exist_ok=True)
     _write(dst, arrays, compressed=True)
 
