@@ -45,3 +45,18 @@ def test_only_the_policies_of_the_chosen_steps_must_exist(tmp_path, monkeypatch)
         with pytest.raises(SystemExit) as e:
             code_suite.main()
         assert str(e.value) == "code_suite: no policy file for gone"
+
+
+def test_a_policy_is_named_by_file_by_committed_name_or_by_its_results_folder(tmp_path):
+    known = dict(code_suite.POLICIES)
+    try:
+        names = code_suite.policy_names(f"stage2_u,mine={tmp_path / 'p.npz'},generalist_d2,nowhere")
+        assert names == ["stage2_u", "mine", "generalist_d2", "nowhere"]
+        assert code_suite.POLICIES["stage2_u"] == known["stage2_u"]
+        assert code_suite.POLICIES["mine"] == tmp_path / "p.npz"
+        # a published run folder: found without NAME=FILE (its policy is committed)
+        assert code_suite.POLICIES["generalist_d2"].exists()
+        assert not code_suite.POLICIES["nowhere"].exists()  # main names it as missing
+    finally:
+        code_suite.POLICIES.clear()
+        code_suite.POLICIES.update(known)

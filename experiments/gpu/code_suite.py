@@ -272,13 +272,30 @@ def mesh_table(out: Path, runs: dict) -> list[str]:
     return lines
 
 
+def policy_names(arg: str) -> list[str]:
+    """The names in a --policies / --mesh-policies list, each entered in POLICIES: NAME=FILE, a
+    committed policy's name, or a folder under experiments/results/ (its policy.npz). A bare name
+    that is none of these (an uncommitted run: 2026-11-28's mesh step found nothing and did not
+    run) still fails main's check, naming it."""
+    names = []
+    for n in filter(None, arg.split(",")):
+        name, sep, file = n.partition("=")
+        if sep:
+            POLICIES[name] = Path(file)
+        elif name not in POLICIES:
+            POLICIES[name] = RESULTS / name / "policy.npz"
+        names.append(name)
+    return names
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--steps", default="suite,mesh,alone,table")
     ap.add_argument("--policies", default=",".join(POLICIES),
-                    help="for the suite step: names of committed policies, or NAME=FILE for "
-                    "another (e.g. one trained in the same GPU command)")
+                    help="for the suite step: names of committed policies or of folders under "
+                    "experiments/results/ holding policy.npz, or NAME=FILE for another (e.g. one "
+                    "trained in the same GPU command)")
     ap.add_argument("--mesh-policies", default=",".join(MESH_POLICIES), help="for the mesh step")
     ap.add_argument("--robots", type=int, default=1000, help="robots per case")
     ap.add_argument("--episode-s", type=float, default=30.0)
@@ -292,21 +309,14 @@ def main() -> None:
     spec = EvalSpec(robots_per_level=a.robots, episode_length_s=a.episode_s, seed=a.seed,
                     resolution=a.resolution, env_overrides=tuple(a.env))
     a.out.mkdir(parents=True, exist_ok=True)
-    names, mesh_names = [], []
-    for arg, into in ((a.policies, names), (a.mesh_policies, mesh_names)):
-        for n in filter(None, arg.split(",")):
-            name, sep, file = n.partition("=")
-            if sep:
-                POLICIES[name] = Path(file)
-            into.append(name)
-    mesh_names = tuple(mesh_names)
+    names, mesh_names = policy_names(a.policies), tuple(policy_names(a.mesh_policies))
     steps = a.steps.split(",")
     # only the policies the chosen steps run (the default --policies list names every committed
     # one: a call that moved a results folder out of the tree to fit what it carries ran no
     # offset step for a missing suite policy, 2026-11-27)
     wanted = [*(names if "suite" in steps else ()),
               *(mesh_names if {"mesh", "offset"} & set(steps) else ())]
-    missing = [n for n in wanted if n not in POLICIES or not POLICIES[n].exists()]
+    missing = [f"{n} ({POLICIES[n]})" for n in wanted if not POLICIES[n].exists()]
     if missing:
         raise SystemExit(f"code_suite: no policy file for {', '.join(missing)}")
     t0 = time.time()
