@@ -32,8 +32,9 @@ GRID = [f"d{d}i" + (f"_l{ms}" if ms else "") for d in ("0.1", "0.5", "1", "2")
 def parse(config: str) -> tuple[tuple[str, ...], int | None]:
     """d<damping>[i][_l<ms>][_n<iterations>][_c<contacts>] -> (env overrides, contacts): e.g. d2
     (explicit), d2i (implicit), d2i_l20 (and a fixed 20 ms action delay, robot.action_delay_s, in
-    MJX and the ground truth alike), d2i_n30 (MJX's solver given 30 Newton iterations instead of
-    the evaluation physics' 8; the ground truth's solver is MuJoCo's default either way), d2i_c3
+    MJX and the ground truth alike), d2i_n30 (the solver given 30 Newton iterations: MJX's instead
+    of the evaluation physics' 8, the ground truth's instead of MuJoCo's default 100, there with
+    the evaluation physics' line-search steps too: `gt_solver`), d2i_c3
     (MJX's columns collider with 3 contacts a sphere instead of 2,
     `sim.contact.set_columns_ncon`; the ground truth has one contact per box touched)."""
     base, *parts = config.split("_")
@@ -60,6 +61,19 @@ def parse(config: str) -> tuple[tuple[str, ...], int | None]:
     return out, contacts
 
 
+def gt_solver(config: str):
+    """The ground truth's solver for a config name: MuJoCo's default, or with _n<iterations> that
+    many Newton iterations and the evaluation physics' line-search steps (MJX's budget, e.g.
+    d2i_n8: the ground truth run with what MJX's evaluation physics runs)."""
+    from mjx_stairs.sim import box_world as bw
+    from mjx_stairs.sim.robot import PHYSICS
+
+    n = dict(p.split("=") for p in parse(config)[0]).get("robot.solver_iterations")
+    if n is None:
+        return bw.DEFAULT_SOLVER
+    return bw.SolverConfig(iterations=int(n), ls_iterations=PHYSICS["evaluation"]["ls_iterations"])
+
+
 def overrides(config: str) -> tuple[str, ...]:
     """The env overrides of a config name (`parse`)."""
     return parse(config)[0]
@@ -83,7 +97,7 @@ def run(out: Path, policy_path: str, cell: tuple, robots: int, seed: int, config
                     env_overrides=env_overrides)
     t0 = time.time()
     rec = (success_by_cell({"p": policy}, spec)["p"] if what == "mjx"
-           else success_in_ground_truth(policy, spec))
+           else success_in_ground_truth(policy, spec, solver=gt_solver(config)))
     rec.update(policy=policy_path, config=config, overrides=list(env_overrides),
                columns_contacts=contacts,
                wall_s_total=time.time() - t0)

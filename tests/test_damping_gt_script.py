@@ -50,3 +50,13 @@ def test_a_bad_config_is_a_one_line_error(bad):
     with pytest.raises(SystemExit, match=f"config '{bad}': expected") as e:
         damping_gt.overrides(bad)
     assert "\n" not in str(e.value)
+
+
+def test_n_gives_the_ground_truth_mjx_budget_and_nothing_else_changes_its_solver():
+    from mjx_stairs.sim import box_world as bw
+
+    assert damping_gt.gt_solver("d2i") == bw.DEFAULT_SOLVER
+    assert damping_gt.gt_solver("d2i_l20_c3") == bw.DEFAULT_SOLVER
+    s = damping_gt.gt_solver("d2i_n8")
+    assert (s.iterations, s.ls_iterations) == (8, 10)
+    assert s.tolerance == bw.DEFAULT_SOLVER.tolerance
