@@ -232,8 +232,8 @@ def _exit_face(h, p, ix, iy, lo, hi, sunk_exit: str):
     up = jnp.array([0.0, 0.0, 1.0])
     if sunk_exit == "top":
         return hi[2] - p[2], up
-    if sunk_exit != "nearest":
-        raise ValueError(f"sunk_exit must be 'top' or 'nearest', got {sunk_exit!r}")
+    if sunk_exit not in ("nearest", "face"):
+        raise ValueError(f"sunk_exit must be 'top', 'nearest' or 'face', got {sunk_exit!r}")
     ncol, nrow = h.ncol, h.nrow
 
     def below(jx, jy):
@@ -246,6 +246,8 @@ def _exit_face(h, p, ix, iy, lo, hi, sunk_exit: str):
                        below(ix, iy + 1)])
     normals = jnp.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0],
                          [0.0, 1.0, 0.0]])
+    if sunk_exit == "face":  # a study (set_exit_study): any face, as a MuJoCo box pushes it
+        open_ = jnp.ones_like(open_)
     j = jnp.argmin(jnp.where(open_, depth, jnp.inf))
     return depth[j], normals[j]
 
@@ -278,14 +280,15 @@ def _padded(fn, ncon: int):
     return padded
 
 
-def _colliders(ncon: int) -> tuple:
-    """(nearest-point collider, {asset name: columns collider}) with ``ncon`` contacts a pair."""
+def _colliders(ncon: int, exit_rule: str = "nearest") -> tuple:
+    """(nearest-point collider, {asset name: columns collider}) with ``ncon`` contacts a pair;
+    ``exit_rule``: what the exit asset's collider does with a sunk centre (set_exit_study)."""
     nearest = sphere_heightfield if ncon == NCON else _padded(sphere_heightfield, ncon)
     return (collision_convex.collider(ncon=ncon)(nearest), {
         COLUMNS_HFIELD: collision_convex.collider(ncon=ncon)(
             functools.partial(sphere_columns, ncon=ncon)),
         COLUMNS_EXIT_HFIELD: collision_convex.collider(ncon=ncon)(
-            functools.partial(sphere_columns_nearest_exit, ncon=ncon)),
+            functools.partial(sphere_columns, sunk_exit=exit_rule, ncon=ncon)),
     })
 
 
@@ -312,6 +315,18 @@ def set_columns_ncon(ncon: int) -> None:
         raise ValueError(f"ncon must be at least {NCON} (the nearest-point collider's), got {ncon}")
     _NEAREST, _BY_NAME = _colliders(ncon)
     _collide.ncon = ncon
+
+
+def set_exit_study(rule: str) -> None:
+    """For a whole process, before any model is put on the device: the evaluation physics'
+    columns (``sunk_exit="nearest"``) push a sunk centre out by ``rule`` instead: "face", the
+    nearest of the column's five faces whether or not a column as high stands beside it (what a
+    MuJoCo box does with a centre inside it; issue 19's spiral study, experiments/gt_spiral/).
+    Not a training option: records still name the preset's rule."""
+    global _NEAREST, _BY_NAME
+    if rule not in ("nearest", "face"):
+        raise ValueError(f"rule must be 'nearest' or 'face', got {rule!r}")
+    _NEAREST, _BY_NAME = _colliders(_collide.ncon, rule)
 
 
 def register() -> None:

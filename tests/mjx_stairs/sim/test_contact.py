@@ -304,8 +304,13 @@ def test_columns_sunk_centre_leaves_by_the_top_or_the_nearest_exposed_face():
     # as high (inside the solid), so the riser is the exit.
     d, n, _ = collide([1.0875 + 0.005, 0.2875 + 0.002, 0.30], "nearest")
     np.testing.assert_allclose([d, *n], [-0.005 - r, -1, 0, 0], atol=1e-5)
+    # "face" (a study: set_exit_study) takes that side all the same, as a MuJoCo box would
+    d, n, _ = collide([1.0875 + 0.005, 0.2875 + 0.002, 0.30], "face")
+    np.testing.assert_allclose([d, *n], [-0.002 - r, 0, -1, 0], atol=1e-5)
     with pytest.raises(Exception, match="sunk_exit"):
         rb.RobotConfig(terrain_contacts="columns", sunk_exit="side")
+    with pytest.raises(ValueError, match="rule must be"):  # before it changes anything
+        contact.set_exit_study("top")
 
 
 def test_columns_third_contact_is_the_other_riser_of_a_corner_across_the_grid():
