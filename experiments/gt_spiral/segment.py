@@ -1,5 +1,5 @@
 # ruff: noqa: E501, E702, E401, E402, I001
-"""Spiral L6 up, generalist_noent, damping 2 implicit: the ground truth closed loop with every
+"""python experiments/gt_spiral/segment.py ROBOTS OUT K,K,... OPTION [FAMILY:LEVEL]; spiral L6 (default) up, generalist_noent, damping 2 implicit: the ground truth closed loop with every
 state kept, then MJX (evaluation physics) from the GT's states at steps K to the episode's end."""
 import json, sys, time
 import numpy as np
@@ -12,7 +12,8 @@ from mjx_stairs.study.evaluate import CellSpec
 DAMP = ("robot.joint_damping=2.0", "robot.implicit_damping=true")
 policy = load_policy("experiments/results/generalist_noent/policy.npz")
 B = int(sys.argv[1]); out = sys.argv[2]
-cell = ("spiral", "test", 5)
+fam, lv = (sys.argv[5] if len(sys.argv) > 5 else "spiral:6").split(":")  # FAMILY:LEVEL (1-based)
+cell = (fam, "test", int(lv) - 1)
 gt_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0, env_overrides=DAMP)
 mjx_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0,
                     env_overrides=(*OPTIONS[sys.argv[4]], *DAMP))
