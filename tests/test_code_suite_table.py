@@ -44,7 +44,8 @@ def test_only_the_policies_of_the_chosen_steps_must_exist(tmp_path, monkeypatch)
         monkeypatch.setattr("sys.argv", [*run, "--steps", steps])
         with pytest.raises(SystemExit) as e:
             code_suite.main()
-        assert str(e.value) == "code_suite: no policy file for gone"
+        # one line naming the policy and the file it looked for
+        assert str(e.value) == f"code_suite: no policy file for gone ({tmp_path / 'gone.npz'})"
 
 
 def test_a_policy_is_named_by_file_by_committed_name_or_by_its_results_folder(tmp_path):
