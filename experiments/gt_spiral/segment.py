@@ -1,5 +1,5 @@
 # ruff: noqa: E501, E702, E401, E402, I001
-"""python experiments/gt_spiral/segment.py ROBOTS OUT K,K,... OPTION [FAMILY:LEVEL]; spiral L6 (default) up, generalist_noent, damping 2 implicit: the ground truth closed loop with every
+"""python experiments/gt_spiral/segment.py ROBOTS OUT K,K,... OPTION [FAMILY:LEVEL [RESOLUTION]]; spiral L6 (default) up, generalist_noent, damping 2 implicit: the ground truth closed loop with every
 state kept, then MJX (evaluation physics) from the GT's states at steps K to the episode's end."""
 import json, sys, time
 import numpy as np
@@ -14,8 +14,9 @@ policy = load_policy("experiments/results/generalist_noent/policy.npz")
 B = int(sys.argv[1]); out = sys.argv[2]
 fam, lv = (sys.argv[5] if len(sys.argv) > 5 else "spiral:6").split(":")  # FAMILY:LEVEL (1-based)
 cell = (fam, "test", int(lv) - 1)
-gt_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0, env_overrides=DAMP)
-mjx_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0,
+RES = float(sys.argv[6]) if len(sys.argv) > 6 else 0.025  # the atlas grid (m)
+gt_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0, resolution=RES, env_overrides=DAMP)
+mjx_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0, resolution=RES,
                     env_overrides=(*OPTIONS[sys.argv[4]], *DAMP))
 t0 = time.time()
 import os

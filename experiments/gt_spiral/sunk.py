@@ -13,7 +13,7 @@ mq = np.load(sys.argv[1] + "/mjx_evaluation_exit_qpos.npy")  # [T, B, 19] after 
 mq = np.concatenate([d["qpos"][:1], mq], 0)
 policy = load_policy("experiments/results/generalist_noent/policy.npz")
 B = d["qpos"].shape[1]; fam, lv = (sys.argv[2] if len(sys.argv) > 2 else "spiral:6").split(":"); cell = (fam, "test", int(lv) - 1)
-_, _, _, tiles, models = gt._start(policy, CellSpec(cells=(cell,), robots_per_cell=B, seed=0, env_overrides=DAMP), bw.DEFAULT_SOLVER, "boxes")
+_, _, _, tiles, models = gt._start(policy, CellSpec(cells=(cell,), robots_per_cell=B, seed=0, resolution=float(sys.argv[3]) if len(sys.argv) > 3 else 0.025, env_overrides=DAMP), bw.DEFAULT_SOLVER, "boxes")
 def count(Q, every=5):
     tot = 0; sunk = 0; deep = []
     for b in range(B):
