@@ -1,7 +1,7 @@
 # ruff: noqa: E501, E702, E401, E402, I001
 """python experiments/gt_spiral/segment.py ROBOTS OUT K,K,... OPTION [FAMILY:LEVEL [RESOLUTION]]; spiral L6 (default) up, generalist_noent, damping 2 implicit: the ground truth closed loop with every
 state kept, then MJX (evaluation physics) from the GT's states at steps K to the episode's end."""
-import json, sys, time
+import json, os, sys, time
 import numpy as np
 sys.path.insert(0, "experiments"); sys.path.insert(0, "experiments/gpu")
 from fidelity import OPTIONS
@@ -9,7 +9,7 @@ from gt_uturn_probe import gt_run, mjx_run
 from mjx_stairs.rl.policy import load_policy
 from mjx_stairs.study.evaluate import CellSpec
 
-DAMP = ("robot.joint_damping=2.0", "robot.implicit_damping=true")
+DAMP = (f"robot.joint_damping={os.environ.get('DAMPING', '2.0')}", "robot.implicit_damping=true")  # env DAMPING: N m s/rad
 policy = load_policy("experiments/results/generalist_noent/policy.npz")
 B = int(sys.argv[1]); out = sys.argv[2]
 fam, lv = (sys.argv[5] if len(sys.argv) > 5 else "spiral:6").split(":")  # FAMILY:LEVEL (1-based)

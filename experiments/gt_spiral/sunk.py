@@ -1,13 +1,14 @@
 # ruff: noqa: E501, E702, E401, E402, I001
 """Sunk sphere centres (inside a ground-truth box) along the GT and the MJX trajectories of
 spiral L6 d2i from the same starts, judged against the same boxes."""
+import os
 import sys
 import mujoco, numpy as np
 from mjx_stairs.rl.policy import load_policy
 from mjx_stairs.sim import box_world as bw
 from mjx_stairs.study import ground_truth as gt
 from mjx_stairs.study.evaluate import CellSpec
-DAMP = ("robot.joint_damping=2.0", "robot.implicit_damping=true")
+DAMP = (f"robot.joint_damping={os.environ.get('DAMPING', '2.0')}", "robot.implicit_damping=true")  # env DAMPING: N m s/rad
 d = dict(np.load(sys.argv[1] + "/gt.npz"))
 mq = np.load(sys.argv[1] + "/mjx_evaluation_exit_qpos.npy")  # [T, B, 19] after each step
 mq = np.concatenate([d["qpos"][:1], mq], 0)
@@ -23,7 +24,12 @@ def count(Q, every=5):
         sph = [i for i in range(m.ngeom) if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_SPHERE and m.geom_contype[i]]
         for k in range(0, Q.shape[0], every):
             if k > 0 and np.allclose(Q[k, b], Q[k - 1, b]):
-                break
+                break  # the ground truth's episode has ended (its state held)
+            if k > 0 and np.linalg.norm(Q[k, b, :2] - Q[k - every, b, :2]) > 0.5:
+                break  # MJX's episode has ended: the robot is back at a spawn (auto-reset)
+            if np.linalg.norm(Q[k, b, :2] - d["goal"][b, :2]) < 0.5:
+                break  # at the goal: MJX's robots stand there to the episode's end, the
+                # ground truth's stop once the success has held (climbing steps only)
             dd.qpos[:] = Q[k, b]; mujoco.mj_kinematics(m, dd)
             p = dd.geom_xpos[sph]
             ins = (np.abs(p[:, None, :] - c[None]) < h[None]).all(-1)
