@@ -19,14 +19,12 @@ gt_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0, resolution=RES, env
 mjx_spec = CellSpec(cells=(cell,), robots_per_cell=B, seed=0, resolution=RES,
                     env_overrides=(*OPTIONS[sys.argv[4]], *DAMP))
 t0 = time.time()
-import os
-if os.path.exists(out + "/gt.npz"):
-    r = dict(np.load(out + "/gt.npz"))
-else:
-    r = gt_run(policy, gt_spec)
+kept = os.path.exists(out + "/gt.npz")  # a later call reuses the ground truth's run
+r = dict(np.load(out + "/gt.npz")) if kept else gt_run(policy, gt_spec)
 T = r["action"].shape[0]
 print(f"gt: success {r['success'].mean():.3f} fell {r['fell'].mean():.3f} ({time.time()-t0:.0f} s, T={T})", flush=True)
-os.path.exists(out + "/gt.npz") or np.savez_compressed(out + "/gt.npz", **r)
+if not kept:
+    np.savez_compressed(out + "/gt.npz", **r)
 res = {"gt_success": r["success"].tolist(), "gt_fell": r["fell"].tolist(), "segments": {}}
 for k in [int(x) for x in sys.argv[3].split(",")]:
     # robots whose GT episode is still running at step k (not ended before)
