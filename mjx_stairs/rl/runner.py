@@ -246,9 +246,12 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     state = trainer.init(jax.random.PRNGKey(config.train.seed))
     init_from = getattr(config, "init_from", "")
     if init_from:
+        std = getattr(config, "init_from_std", 0.0)
         state = start_from_policy(state, init_from, trainer,
-                                  history=getattr(getattr(config, "env", None), "obs_history", 0))
-        _say(f"initialised params and normaliser from {init_from}")
+                                  history=getattr(getattr(config, "env", None), "obs_history", 0),
+                                  std=std)
+        _say(f"initialised params and normaliser from {init_from}"
+             + (f", exploration std {std}" if std else ""))
     if main:
         _write_config(run_dir, config)
     return state

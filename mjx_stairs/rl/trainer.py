@@ -18,6 +18,7 @@ The env is described in rl.rollout; robots are split over the devices of every p
 from __future__ import annotations
 
 import functools
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -333,9 +334,11 @@ def compiled_chunk(trainer: Trainer, state: TrainState) -> tuple[Callable, float
 
 
 def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
-                      history: int = 0) -> TrainState:
+                      history: int = 0, std: float = 0.0) -> TrainState:
     """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
-    starts from stage 1). The Adam moments, RNG and counters stay fresh. An experiment with
+    starts from stage 1). The Adam moments, RNG and counters stay fresh. `std` > 0: the policy's
+    exploration std (every action) is set to it, e.g. to explore again from a policy whose std
+    has shrunk (a fine-tune on new terrain; 0 keeps the saved one). An experiment with
     `history` steps of observation history (env.obs_history) starts from a policy without
     history through policy.widen_for_history: it acts as the saved policy at the start."""
     saved = policy_lib.load_policy(path)
@@ -349,6 +352,9 @@ def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
         raise checkpoint.CheckpointError(
             f"{path}: policy shapes do not fit this experiment's network and observation layout"
         )
-    params = put_global(saved.params, trainer.sharding.params)
+    params = dict(saved.params)
+    if std > 0:
+        params["log_std"] = jnp.full_like(params["log_std"], math.log(std))
+    params = put_global(params, trainer.sharding.params)
     norm = put_global(saved.normalizer, trainer.sharding.normalizer)
     return state._replace(params=params, normalizer=norm)

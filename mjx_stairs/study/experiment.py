@@ -86,11 +86,19 @@ class ExperimentConfig:
     init_from: str = field(
         default="", metadata={"help": "policy file whose params and normaliser start this run"}
     )
+    init_from_std: float = field(
+        default=0.0, metadata={"help": "> 0: the exploration std (every action) that a run started "
+                               "from init_from begins with, in place of the policy's own (0: keep)"}
+    )
     publish_dir: str = field(
         default="", metadata={"help": "copy policy, metrics, config and run facts here at the end"}
     )
 
     def __post_init__(self):
+        if self.init_from_std < 0 or (self.init_from_std and not self.init_from):
+            raise ConfigError(f"config key 'init_from_std': a std > 0 for a run with init_from "
+                              f"(0 keeps the policy's), got {self.init_from_std}"
+                              f"{'' if self.init_from else ' without init_from'}")
         weights, families = self.env.curriculum.family_weights, self.terrain.families
         if weights and len(weights) != len(families):
             raise ConfigError(f"config key 'env.curriculum.family_weights': one weight per "

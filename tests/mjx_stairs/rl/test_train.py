@@ -207,6 +207,24 @@ def test_run_then_resume_equals_one_run(tmp_path):
         runner.run(_run_cfg(tmp_path / "c"), env, resume=True)
 
 
+def test_a_run_started_from_a_policy_keeps_or_resets_its_std(tmp_path):
+    """init_from (trainer.start_from_policy) takes the published policy's params and normaliser;
+    with init_from_std > 0 only its exploration std is replaced (a fine-tune that explores
+    again), every other weight is the policy's."""
+    first = runner.run(_run_cfg(tmp_path / "a", total_iterations=2), TOY)
+    published = policy_lib.load_policy(first.run_dir / "policy.npz")
+    trainer = train_lib.build_trainer(_run_cfg(tmp_path / "b"), TOY)
+    fresh = trainer.init(jax.random.PRNGKey(3))
+    kept = train_lib.start_from_policy(fresh, first.run_dir / "policy.npz", trainer)
+    assert _leaves_equal(kept.params, published.params)
+    assert _leaves_equal(kept.normalizer, published.normalizer)
+    reset = train_lib.start_from_policy(fresh, first.run_dir / "policy.npz", trainer, std=0.3)
+    np.testing.assert_allclose(np.exp(np.asarray(reset.params["log_std"])), 0.3, rtol=1e-6)
+    assert not np.allclose(np.asarray(published.params["log_std"]), np.log(0.3))
+    others = lambda p: {k: v for k, v in p.items() if k != "log_std"}  # noqa: E731
+    assert _leaves_equal(others(reset.params), others(published.params))
+
+
 def test_resume_under_another_seed_draws_another_stream(tmp_path):
     """A state resumed under the seed it was saved with continues exactly (above); under another
     train.seed its key is folded with the new seed: the continuation differs, and is itself

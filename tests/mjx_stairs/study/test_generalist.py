@@ -95,6 +95,7 @@ def test_family_weights_pick_families_at_their_rates():
     ("terrain.building_landing=[0.9]", "terrain.building_landing"),
     ("terrain.building_landing=[1.5, 1.0]", "terrain.building_landing"),
     ("terrain.building_landing=[-0.9, 1.8]", "terrain.building_landing"),
+    ("init_from_std=-0.5", "init_from_std"),
 ])
 def test_bad_values_fail_at_load_naming_the_key(override, key):
     with pytest.raises(ConfigError) as e:
