@@ -157,6 +157,13 @@ class EnvConfig:
     # rule ended climbing robots (docs/diagnosis_code_suite.md); a 0.3 m segment (about a
     # tread) follows the slope instead. On flat ground both rules are the same.
     low_line_m: float = 0.0
+    # The `tilt` ending's "upright": 0, the world's vertical (every result so far); > 0, the
+    # normal of the terrain's slope along the base's heading, a line fitted to the terrain height
+    # at 9 points on a tilt_slope_m segment centred under the base. On a 19.7 / 25.4 cm stair
+    # (37.8 deg) the world rule ends a climbing robot pitched 57 deg nose up, 19 deg off the
+    # stair's slope; with a 0.8 m segment (about three treads) the rule reads the pitch against
+    # the stair (docs/results.md 8p). On flat ground both rules are the same.
+    tilt_slope_m: float = 0.0
     terminate_on_trunk_contact: bool = True  # training only; off in evaluation
     # rad: the spawn yaw is the tile's +- this (the authors' stage 2: pi, any heading); < 0:
     # the tile's own half-range (45 deg on the paper families)
@@ -196,6 +203,8 @@ class EnvConfig:
         lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
         fixed = self.robot.action_delay_s
         _require("env", [
+            ("tilt_slope_m", self.tilt_slope_m, self.tilt_slope_m >= 0,
+             ">= 0 (m; 0: tilt from the world's vertical)"),
             ("obs_history", self.obs_history,
              isinstance(self.obs_history, int) and 0 <= self.obs_history <= 50,
              "an integer in [0, 50] (policy steps)"),

@@ -38,6 +38,32 @@ def ground_under(height: Callable, x, y, yaw, length: float, xp=jnp):
     return height(x[..., None] + t * c, y[..., None] + t * s).mean(-1)
 
 
+SLOPE_POINTS = 9
+"""Points on the segment along the heading that the `tilt` ending fits the slope to."""
+
+
+def slope_along(height: Callable, x, y, yaw, length: float, xp=jnp):
+    """[...] the terrain's slope angle (rad, rising ahead > 0) along heading `yaw` at (x, y)
+    [...] (EnvConfig.tilt_slope_m): the least-squares line through the terrain height at
+    SLOPE_POINTS points spaced evenly on a `length` segment centred there; 0 for length 0."""
+    if length <= 0:
+        return xp.zeros_like(x)
+    t = np.linspace(-length / 2, length / 2, SLOPE_POINTS)
+    c, s = xp.cos(yaw)[..., None], xp.sin(yaw)[..., None]
+    h = height(x[..., None] + t * c, y[..., None] + t * s)
+    return xp.arctan(((h - h.mean(-1, keepdims=True)) * t).sum(-1) / float((t * t).sum()))
+
+
+def upright(body_z, yaw, slope, xp=jnp):
+    """[...] cos of the angle between the body's z axis `body_z` [..., 3] (world frame) and the
+    normal of a terrain rising at `slope` rad along heading `yaw`: the world's vertical tipped
+    back by `slope` about the axis across the heading. The `tilt` ending fires when it is under
+    cos(max_tilt); with slope 0 it is body_z's world z, the world-vertical rule."""
+    ss = xp.sin(slope)
+    return (-ss * xp.cos(yaw) * body_z[..., 0] - ss * xp.sin(yaw) * body_z[..., 1]
+            + xp.cos(slope) * body_z[..., 2])
+
+
 class Endings(NamedTuple):
     """How the step ended the episode ([] each); `done` = terminated | truncated."""
 
@@ -55,14 +81,15 @@ class Endings(NamedTuple):
 
 def endings(c: EnvConfig, kin: Kinematics, q: rw.Quantities, info: dict, finite: jnp.ndarray,
             base_clearance: jnp.ndarray, world_size: tuple[float, float], hold_steps: int,
-            episode_steps: int) -> Endings:
+            episode_steps: int, slope: jnp.ndarray | float = 0.0) -> Endings:
     """Success (close and slow, held for `hold_steps`), terminations and the timeout. A robot
-    whose physics blew up (not `finite`) is terminated."""
+    whose physics blew up (not `finite`) is terminated. `slope`: the terrain's slope along the
+    heading that the tilt is read against (slope_along; 0: the world's vertical)."""
     close = (q.planar_goal_distance < c.success_distance) & (q.planar_speed < c.success_speed)
     success_count = jnp.where(close, info["success_count"] + 1, 0)
     success = jnp.maximum(info["success"], (success_count >= hold_steps).astype(jnp.float32))
     pos = kin.pos
-    tilted = kin.gravity_body[2] > -jnp.cos(c.max_tilt)
+    tilted = upright(kin.rot[:, 2], kin.yaw, slope) < jnp.cos(c.max_tilt)
     too_low = base_clearance < c.min_base_height
     fell = tilted | too_low
     outside = ((pos[0] < 0) | (pos[1] < 0) | (pos[0] > world_size[0])

@@ -293,10 +293,12 @@ class StairEnv(Env):
 
     def _endings(self, kin: Kinematics, q: rw.Quantities, info: dict,
                  finite: jnp.ndarray) -> endings.Endings:
-        clearance = kin.pos[2] - endings.ground_under(
-            self.terrain_height, kin.pos[0], kin.pos[1], kin.yaw, self.config.low_line_m)
-        return endings.endings(self.config, kin, q, info, finite, clearance, self.terrain.size,
-                               self._hold_steps, self._episode_steps)
+        x, y, c = kin.pos[0], kin.pos[1], self.config
+        clearance = kin.pos[2] - endings.ground_under(self.terrain_height, x, y, kin.yaw,
+                                                      c.low_line_m)
+        slope = endings.slope_along(self.terrain_height, x, y, kin.yaw, c.tilt_slope_m)
+        return endings.endings(c, kin, q, info, finite, clearance, self.terrain.size,
+                               self._hold_steps, self._episode_steps, slope)
 
     def _auto_reset(self, data: mjx.Data, info: dict, final_obs: dict, ends: endings.Endings,
                     moved_up: jnp.ndarray, key: jax.Array) -> tuple[mjx.Data, dict, dict]:

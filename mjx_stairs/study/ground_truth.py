@@ -140,11 +140,12 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
     """(close [N], fell [N]) by the env's rules (eval settings: no trunk-contact ending)."""
     c = env.config
     pos = qpos[:, :3]
-    x, y = qpos[:, 4], qpos[:, 5]
-    up_z = 1 - 2 * (x * x + y * y)  # R[2, 2]: the body's z axis against the world's
-    tilted = up_z < np.cos(c.max_tilt)
+    w, x, y, z = qpos[:, 3:7].T
+    body_z = np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], 1)
     height = lambda x, y: np.asarray(env.terrain_height(jnp.asarray(x), jnp.asarray(y)))
     yaw = quat_yaw(qpos[:, 3:7].T, xp=np)
+    slope = endings.slope_along(height, pos[:, 0], pos[:, 1], yaw, c.tilt_slope_m, xp=np)
+    tilted = endings.upright(body_z, yaw, slope, xp=np) < np.cos(c.max_tilt)
     ground = endings.ground_under(height, pos[:, 0], pos[:, 1], yaw, c.low_line_m, xp=np)
     too_low = pos[:, 2] - ground < c.min_base_height
     wx, wy = (np.asarray(env.atlas_shape[::-1]) - 1) * env.resolution

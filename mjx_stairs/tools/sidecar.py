@@ -174,13 +174,16 @@ def _evaluation(cfg: EnvConfig) -> dict[str, Any]:
                    "speed < success_speed_m_s for success_hold_s",
         "success_distance_m": cfg.success_distance, "success_speed_m_s": cfg.success_speed,
         "success_hold_s": cfg.success_hold_s,
-        "fall": "the base's z axis tilts more than max_tilt_rad from the world's, or the base is "
+        "fall": "the base's z axis tilts more than max_tilt_rad from the world's vertical (with "
+                "tilt_slope_m > 0: from the normal of the terrain's slope along the base's "
+                "heading, the least-squares line through the terrain height at 9 points spaced "
+                "evenly on a tilt_slope_m segment centred under the base), or the base is "
                 "lower than min_base_height_m above the terrain under it: the terrain height at "
                 "the base's (x, y) when low_line_m is 0, else the mean terrain height at 5 "
                 "points spaced evenly on a low_line_m segment centred there along the base's "
                 "heading (its x axis projected on the ground)",
         "max_tilt_rad": cfg.max_tilt, "min_base_height_m": cfg.min_base_height,
-        "low_line_m": cfg.low_line_m,
+        "low_line_m": cfg.low_line_m, "tilt_slope_m": cfg.tilt_slope_m,
         "episode_length_s": cfg.episode_length_s,
         "spawn_height_m": cfg.spawn_height, "spawn_margin_m": cfg.spawn_margin,
         "starts": "base at spawn_height_m above the spawn floor, upright, joints at the nominal "

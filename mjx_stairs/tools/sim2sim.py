@@ -209,8 +209,24 @@ class Sim:
         if not np.isfinite(z[len(t) // 2]):  # off the staircase's grid
             return True
         ground = z[np.isfinite(z)].mean()  # points off the grid left out
-        return bool(rot[2, 2] < np.cos(ev.get("max_tilt_rad", 1.0))
+        return bool(self.upright(pos, rot, heading) < np.cos(ev.get("max_tilt_rad", 1.0))
                     or pos[2] - ground < ev.get("min_base_height_m", 0.12))
+
+    def upright(self, pos: np.ndarray, rot: np.ndarray, heading: np.ndarray) -> float:
+        """The sidecar's tilt rule: cos of the body's z axis against the world's vertical, or,
+        with tilt_slope_m > 0, against the normal of the terrain's slope along the heading: the
+        least-squares line through the height at 9 points on that segment (off the grid: the
+        world's vertical)."""
+        length = self.c.evaluation.get("tilt_slope_m", 0.0)
+        if length <= 0:
+            return float(rot[2, 2])
+        t = np.linspace(-length / 2, length / 2, 9)
+        z = sw.terrain_z(self.w, pos[:2] + t[:, None] * heading)
+        slope = np.arctan(((z - z.mean()) * t).sum() / (t * t).sum()) if np.all(
+            np.isfinite(z)) else 0.0
+        normal = np.array([-np.sin(slope) * heading[0], -np.sin(slope) * heading[1],
+                           np.cos(slope)])
+        return float(rot[:, 2] @ normal)
 
 
 # ----------------------------------------------------------------------------- episodes

@@ -326,8 +326,8 @@ def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
     ev = side["evaluation"]
     assert (ev["success_distance_m"], ev["success_speed_m_s"], ev["success_hold_s"]) == (
         cfg.success_distance, cfg.success_speed, cfg.success_hold_s)
-    assert (ev["max_tilt_rad"], ev["min_base_height_m"], ev["low_line_m"]) == (
-        cfg.max_tilt, cfg.min_base_height, cfg.low_line_m)
+    assert (ev["max_tilt_rad"], ev["min_base_height_m"], ev["low_line_m"], ev["tilt_slope_m"]) == (
+        cfg.max_tilt, cfg.min_base_height, cfg.low_line_m, cfg.tilt_slope_m)
     assert ev["spawn_height_m"] == cfg.spawn_height
     assert "base frame" in side["base_velocity"]
     v = side["versions"]

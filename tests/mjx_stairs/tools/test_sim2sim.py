@@ -5,6 +5,7 @@ body, episodes run through the CLI, and bad inputs give one-line errors."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import re
 import subprocess
@@ -377,6 +378,36 @@ def test_trunk_on_a_step_edge_counts_and_on_a_tread_does_not(onnx_file):
         assert d.ncon > 0
     assert counts["edge"]["trunk"] == 1 and counts["tread"]["trunk"] == 0
     assert all(v == 0 for k, v in counts["edge"].items() if k != "trunk")
+
+
+@pytest.mark.parametrize("yaw, fallen_on_the_slope", [(0.0, False), (np.pi, True)])
+def test_the_tilt_rule_reads_the_sidecars_slope_segment(onnx_file, yaw, fallen_on_the_slope):
+    """A base pitched 65 deg nose up over a 37.8 deg stair: fallen by the world's vertical; by
+    the sidecar's tilt_slope_m rule only when it faces down the stair (as endings.upright)."""
+    riser, tread = 0.197, 0.254
+    x = np.arange(160) * 0.025
+    h = np.tile(riser * np.clip(np.floor((x - 1.0) / tread) + 1, 0, 12) * (x >= 1.0), (40, 1))
+    course = s2s.Course("stair", h, 0.025, np.array([0.5, 0.5, 0, 0.1, 0.1, 0, 0]),
+                        np.array([3.8, 0.5, h[0, -1], 0.0]), np.array([[0.5, 0.5, 0],
+                                                                        [3.8, 0.5, 0]]))
+    base = ct.load_contract(onnx_file)
+    fallen = {}
+    for length in (0.0, 0.8):
+        c = dataclasses.replace(base, evaluation={**base.evaluation, "tilt_slope_m": length})
+        sim = s2s.Sim(c, lambda obs: np.zeros(12), sw.build_world(c, h, 0.025), course)
+        ground = riser * (np.floor((2.3 - 1.0) / tread) + 1)
+        sim.reset(2.3, 0.5, yaw, z=ground + 0.3)
+        pitch = np.radians(65)  # the heading's yaw, then nose up about the axis across it
+        q = np.empty(4)
+        mujoco.mju_mulQuat(q, [np.cos(pitch / 2), np.sin(pitch / 2) * np.sin(yaw),
+                               -np.sin(pitch / 2) * np.cos(yaw), 0.0],
+                           [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+        sim.w.data.qpos[sim.w.base_qpos + 3:sim.w.base_qpos + 7] = q
+        _, rot = sim.base()
+        assert rot[:, 0] @ [np.cos(yaw), np.sin(yaw), 0] == pytest.approx(np.cos(pitch))
+        assert rot[2, 0] == pytest.approx(np.sin(pitch))  # the nose is up
+        fallen[length] = sim.fallen()
+    assert fallen == {0.0: True, 0.8: fallen_on_the_slope}
 
 
 # ----------------------------------------------------------------------------- the command
