@@ -3,9 +3,11 @@
 unless --env says otherwise), in MJX's evaluation physics or the CPU MuJoCo ground truth (box
 stairs), with the study's changes: --dt (a shorter physics step, the same 20 ms policy step, in
 both), --resolution (the atlas grid: MJX's columns, the height map and the boxes alike), --exit
-(MJX's sunk-centre rule for the process, contact.set_exit_study). One JSON line.
+(MJX's sunk-centre rule for the process, contact.set_exit_study), --timeconst (every geom's
+contact solref time constant, robot and stairs, in every model the process compiles: MuJoCo's
+default is 0.02 s; a study patch on MjSpec.compile, not a config option). One JSON line.
     python experiments/gt_spiral/cell.py mjx|gt [--cell spiral:6] [--dt 0.0025]
-        [--resolution 0.0125] [--exit face] [--env KEY=VALUE ...]
+        [--resolution 0.0125] [--exit face] [--timeconst 0.01] [--env KEY=VALUE ...]
 (replaces the session's dt.py, res.py and face.py: git show d25518a:experiments/gt_spiral/)"""
 import argparse
 import json
@@ -17,12 +19,24 @@ ap.add_argument("--cell", default="spiral:6", help="FAMILY:LEVEL (1-based, test 
 ap.add_argument("--dt", type=float, default=None)
 ap.add_argument("--resolution", type=float, default=0.025)
 ap.add_argument("--exit", default=None, choices=("nearest", "face"))
+ap.add_argument("--timeconst", type=float, default=None)
 ap.add_argument("--env", nargs="*", default=["robot.joint_damping=2.0", "robot.implicit_damping=true"])
 a = ap.parse_args()
 if a.exit:
     from mjx_stairs.sim import contact
 
     contact.set_exit_study(a.exit)  # before any model is put on the device
+if a.timeconst:
+    import mujoco
+
+    _compile = mujoco.MjSpec.compile
+
+    def _stiffer(spec, *args, **kw):  # both simulators' models: the env's and the box world's
+        for geom in spec.geoms:
+            geom.solref = [a.timeconst, 1.0]
+        return _compile(spec, *args, **kw)
+
+    mujoco.MjSpec.compile = _stiffer
 from mjx_stairs.rl.policy import load_policy
 from mjx_stairs.study.evaluate import CellSpec, success_by_cell
 from mjx_stairs.study.ground_truth import success_in_ground_truth
@@ -35,5 +49,5 @@ spec = CellSpec(cells=((fam, "test", int(lv) - 1),), robots_per_cell=200, seed=0
 t0 = time.time()
 r = success_by_cell({"p": policy}, spec)["p"] if a.what == "mjx" else success_in_ground_truth(policy, spec)
 print(json.dumps({"what": a.what, "cell": a.cell, "overrides": ov, "resolution": a.resolution,
-                  "exit": a.exit, "success": r["success"], "fell": r["fell"],
+                  "exit": a.exit, "timeconst": a.timeconst, "success": r["success"], "fell": r["fell"],
                   "mean_time_to_goal_s": r.get("mean_time_to_goal_s"), "wall": time.time() - t0}))
