@@ -4,8 +4,8 @@ unless --env says otherwise), in MJX's evaluation physics or the CPU MuJoCo grou
 stairs), with the study's changes: --dt (a shorter physics step, the same 20 ms policy step, in
 both), --resolution (the atlas grid: MJX's columns, the height map and the boxes alike), --exit
 (MJX's sunk-centre rule for the process, contact.set_exit_study), --timeconst (every geom's
-contact solref time constant, robot and stairs, in every model the process compiles: MuJoCo's
-default is 0.02 s; a study patch on MjSpec.compile, not a config option). One JSON line.
+contact solref time constant, robot and stairs, in both simulators: robot.contact_timeconst;
+MuJoCo's default is 0.02 s). One JSON line.
     python experiments/gt_spiral/cell.py mjx|gt [--cell spiral:6] [--dt 0.0025]
         [--resolution 0.0125] [--exit face] [--timeconst 0.01] [--env KEY=VALUE ...]
 (replaces the session's dt.py, res.py and face.py: git show d25518a:experiments/gt_spiral/)"""
@@ -26,22 +26,12 @@ if a.exit:
     from mjx_stairs.sim import contact
 
     contact.set_exit_study(a.exit)  # before any model is put on the device
-if a.timeconst:
-    import mujoco
-
-    _compile = mujoco.MjSpec.compile
-
-    def _stiffer(spec, *args, **kw):  # both simulators' models: the env's and the box world's
-        for geom in spec.geoms:
-            geom.solref = [a.timeconst, 1.0]
-        return _compile(spec, *args, **kw)
-
-    mujoco.MjSpec.compile = _stiffer
 from mjx_stairs.rl.policy import load_policy
 from mjx_stairs.study.evaluate import CellSpec, success_by_cell
 from mjx_stairs.study.ground_truth import success_in_ground_truth
 
 ov = tuple(a.env) + ((f"robot.timestep={a.dt}", f"decimation={round(0.02 / a.dt)}") if a.dt else ())
+ov += (f"robot.contact_timeconst={a.timeconst}",) if a.timeconst else ()
 fam, lv = a.cell.split(":")
 policy = load_policy("experiments/results/generalist_noent/policy.npz")
 spec = CellSpec(cells=((fam, "test", int(lv) - 1),), robots_per_cell=200, seed=0,

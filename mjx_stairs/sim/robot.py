@@ -39,11 +39,7 @@ _HIP = (-1.0472, 1.0472)
 _FRONT_THIGH = (-1.5708, 3.4907)
 _REAR_THIGH = (-0.5236, 4.5379)
 _CALF = (-2.7227, -0.83776)
-JOINT_RANGE = np.array(
-    [_HIP, _FRONT_THIGH, _CALF, _HIP, _FRONT_THIGH, _CALF, _HIP, _REAR_THIGH, _CALF]
-    + [_HIP, _REAR_THIGH, _CALF],
-    np.float32,
-)
+JOINT_RANGE = np.array([_HIP, _FRONT_THIGH, _CALF] * 2 + [_HIP, _REAR_THIGH, _CALF] * 2, np.float32)
 """[12, 2] joint position limits (rad), reference table."""
 
 TORQUE_LIMIT = np.array([23.7, 23.7, 45.43] * 4, np.float32)
@@ -68,9 +64,8 @@ SPHERE_GROUPS = {
 
 HEAD = ("trunk_head", (0.293, 0.0, -0.06), 0.047)
 """(name, position in the base frame, radius) of the head sphere that `RobotConfig.head_collision`
-adds to the trunk group: the Go2's head below its front, the lower head sphere of
-assets/go2_full.xml. The trunk-corner spheres end 12 cm behind it and 3.7 cm above its bottom;
-in sim2sim the head touches step edges up to 12 times per episode going up 14 cm risers."""
+adds to the trunk group: the lower head sphere of assets/go2_full.xml, 12 cm ahead of the trunk
+corners; in sim2sim the head touches step edges up to 12 times per episode up 14 cm risers."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,14 +81,12 @@ class RobotConfig:
     ls_iterations: int = 5  # line-search iterations per Newton iteration
     shin_collision: bool = True  # collide the mid-shin spheres with the terrain
     # Sphere-terrain collider: "mjx" (MJX's prism collider, 4 contacts per sphere), "nearest"
-    # (mjx_stairs.sim.contact: the exact nearest surface point, 2 contacts per sphere) or
-    # "columns" (the same, against the grid as flat-topped columns with vertical risers: the
-    # geometry of the CPU MuJoCo ground truth, terrains.boxes).
+    # (sim.contact: the exact nearest surface point, 2 per sphere) or "columns" (the same, against
+    # flat-topped columns with vertical risers: the CPU ground truth's terrains.boxes).
     terrain_contacts: Literal["mjx", "nearest", "columns"] = "mjx"
-    # "columns" only: a sphere centre inside a column leaves through the column's top ("top", the
-    # evaluation physics as published to 2026-11-24) or its nearest exposed face ("nearest", as
-    # MuJoCo's boxes push it: a foot driven into a riser goes back out of the riser, not up onto
-    # the step; the evaluation physics since issue 19 settled it).
+    # "columns" only: a sphere centre inside a column leaves through its top ("top", as published to
+    # 2026-11-24) or its nearest exposed face ("nearest", as MuJoCo's boxes push it: a foot driven
+    # into a riser goes back out of it; the evaluation physics since issue 19 settled it).
     sunk_exit: Literal["top", "nearest"] = "top"
     friction: float = 0.8  # foot-terrain sliding friction
     # N m s/rad on every leg joint (None: the MJCF's JOINT_DAMPING); e.g. evaluating at the Go2
@@ -114,6 +107,9 @@ class RobotConfig:
     # (`--env robot.action_delay_s=0.02`): evaluation turns randomisation off, and with it
     # env.randomization.action_delay_s, which draws the delay per robot instead where set.
     action_delay_s: float = 0.0
+    # s: every geom's contact solref time constant in MJX and the ground truth's box world (0:
+    # MuJoCo's 0.02, as sim2sim keeps); at 0.01 the two agree on spiral L6 (docs/deploy.md).
+    contact_timeconst: float = 0.0
 
     @property
     def action_delay_steps(self) -> int:
@@ -127,6 +123,9 @@ class RobotConfig:
         if self.joint_damping is not None and not self.joint_damping >= 0:
             raise ConfigError("config key 'env.robot.joint_damping': must be >= 0 or none, got "
                               f"{self.joint_damping}")
+        if self.contact_timeconst and not self.contact_timeconst >= 2 * self.timestep:
+            raise ConfigError("config key 'env.robot.contact_timeconst': must be 0 or at least "
+                              f"twice robot.timestep, got {self.contact_timeconst}")
 
 
 IMPLICIT_MIN_ITERATIONS = 3  # for implicit_damping: fewer run the joints away (results.md 8f)
@@ -234,6 +233,7 @@ def build_mj_model(
     set_joint_damping(spec, config)
     if config.head_collision:
         add_head(spec)
+    contact.set_timeconst(spec, config.contact_timeconst)
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0

@@ -166,3 +166,32 @@ def test_the_head_sphere_is_a_trunk_sphere_where_configured():
     pairs = {world.geom(int(g)).name for g in data.contact.geom1[:data.ncon]} | {
         world.geom(int(g)).name for g in data.contact.geom2[:data.ncon]}
     assert rb.HEAD[0] in pairs and not pairs & set(rb.SPHERE_GROUPS["trunk"])
+
+
+def test_contact_timeconst_stiffens_both_simulators_contacts():
+    """RobotConfig.contact_timeconst sets every geom's solref, the robot's and the terrain's, in
+    the MJX model and the ground truth's box world alike (0 leaves MuJoCo's 0.02 s); in MuJoCo
+    itself the stiffer contact lets a standing robot's feet sink less into a box floor."""
+    from mjx_stairs.config import ConfigError
+    from mjx_stairs.sim import box_world
+
+    heights = np.zeros((41, 41), np.float32)
+    stiff = rb.RobotConfig(terrain_contacts="columns", contact_timeconst=0.01)
+    for model in (rb.build_mj_model(heights, 0.25, stiff),
+                  box_world.build_model(np.array([[5.0, 5.0, -0.05, 1.0, 1.0, 0.05]]), stiff)):
+        np.testing.assert_array_equal(model.geom_solref, [[0.01, 1.0]] * model.ngeom)
+    default = rb.build_mj_model(heights, 0.25, rb.RobotConfig(terrain_contacts="columns"))
+    np.testing.assert_array_equal(default.geom_solref[:, 0], 0.02)
+    sink = {}
+    for tc in (0.0, 0.01):
+        world = box_world.build_model(np.array([[5.0, 5.0, -0.05, 1.0, 1.0, 0.05]]),
+                                      rb.RobotConfig(contact_timeconst=tc))
+        data = mujoco.MjData(world)
+        data.qpos[:] = rb.standing_qpos((5.0, 5.0), rb.NOMINAL_BASE_HEIGHT)
+        data.ctrl[:] = rb.NOMINAL_JOINT_POS
+        for _ in range(400):  # 2 s holding the nominal pose
+            mujoco.mj_step(world, data)
+        sink[tc] = -min(data.contact.dist[:data.ncon])
+    assert 0 < sink[0.01] < 0.7 * sink[0.0]
+    with pytest.raises(ConfigError, match="env.robot.contact_timeconst"):
+        rb.RobotConfig(contact_timeconst=0.005)
