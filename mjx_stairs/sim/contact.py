@@ -252,11 +252,6 @@ def _exit_face(h, p, ix, iy, lo, hi, sunk_exit: str):
     return depth[j], normals[j]
 
 
-def sphere_columns_nearest_exit(h, s, subgrid_size: tuple[int, int], ncon: int = NCON):
-    """`sphere_columns` with ``sunk_exit="nearest"``."""
-    return sphere_columns(h, s, subgrid_size, sunk_exit="nearest", ncon=ncon)
-
-
 COLUMNS_HFIELD = "terrain_columns"
 """The heightfield asset name that selects `sphere_columns` (any other name but the next: the
 nearest-point surface collider). MJX keys collision functions by geom types only, and the
@@ -264,7 +259,7 @@ colliders all collide (heightfield, ellipsoid) pairs, so the one registered func
 on the asset's name."""
 
 COLUMNS_EXIT_HFIELD = "terrain_columns_exit"
-"""The heightfield asset name that selects `sphere_columns_nearest_exit`."""
+"""The heightfield asset name that selects `sphere_columns` with ``sunk_exit="nearest"``."""
 
 KEY = (GeomType.HFIELD, GeomType.ELLIPSOID)
 

@@ -26,7 +26,7 @@ from mujoco.mjx._src import support
 
 from mjx_stairs.env import endings, observation
 from mjx_stairs.env import stair_env as envlib
-from mjx_stairs.env.geometry import quat_yaw
+from mjx_stairs.env.geometry import quat_to_mat, quat_yaw
 from mjx_stairs.rl.policy import Policy, policy_action
 from mjx_stairs.sim import box_world as bw
 from mjx_stairs.sim import robot as rb
@@ -140,8 +140,7 @@ def _endings(env: envlib.StairEnv, qpos: np.ndarray, qvel: np.ndarray, goal: np.
     """(close [N], fell [N]) by the env's rules (eval settings: no trunk-contact ending)."""
     c = env.config
     pos = qpos[:, :3]
-    w, x, y, z = qpos[:, 3:7].T
-    body_z = np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], 1)
+    body_z = quat_to_mat(qpos[:, 3:7].T, xp=np)[:, 2].T  # [N, 3]: each body's z axis
     height = lambda x, y: np.asarray(env.terrain_height(jnp.asarray(x), jnp.asarray(y)))
     yaw = quat_yaw(qpos[:, 3:7].T, xp=np)
     slope = endings.slope_along(height, pos[:, 0], pos[:, 1], yaw, c.tilt_slope_m, xp=np)

@@ -330,8 +330,8 @@ def test_columns_third_contact_is_the_other_riser_of_a_corner_across_the_grid():
         pos=jnp.asarray(m.geom_pos[hid]), mat=jnp.eye(3))
     sphere = GeomInfo(jnp.array([1.0875 - r + 1e-3, 0.2875 - r + 1e-3, r - 1e-3]), jnp.eye(3),
                       jnp.full(3, r))
-    d2, p2, f2 = contact.sphere_columns_nearest_exit(info, sphere, (4, 4))
-    d3, p3, f3 = contact.sphere_columns_nearest_exit(info, sphere, (4, 4), ncon=3)
+    d2, p2, f2 = contact.sphere_columns(info, sphere, (4, 4), "nearest")
+    d3, p3, f3 = contact.sphere_columns(info, sphere, (4, 4), "nearest", ncon=3)
     assert d2.shape == (2,) and d3.shape == (3,)
     np.testing.assert_allclose(np.asarray(d3), [-1e-3] * 3, atol=1e-5)
     normals = sorted(map(tuple, np.round(np.asarray(f3[:, 0]), 5)))
@@ -340,7 +340,7 @@ def test_columns_third_contact_is_the_other_riser_of_a_corner_across_the_grid():
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     # On a flat tread the extra contacts stay inactive.
     flat = GeomInfo(jnp.array([0.5, 0.1, r - 1e-3]), jnp.eye(3), jnp.full(3, r))
-    d = np.asarray(contact.sphere_columns_nearest_exit(info, flat, (4, 4), ncon=3)[0])
+    d = np.asarray(contact.sphere_columns(info, flat, (4, 4), "nearest", ncon=3)[0])
     assert d[0] < 0 and (d[1:] > 0.5).all()
     # The process-wide switch sizes every (heightfield, ellipsoid) pair's contacts; back to 2.
     try:
