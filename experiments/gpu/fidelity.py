@@ -6,7 +6,8 @@ CPU MuJoCo ground truth (box stairs, default solver), from the same starting sta
   JAX_PLATFORMS=cpu python experiments/gpu/fidelity.py first OUT --robots 32 --cells 3,8,15 \
       --options reference,lean,nearest_full,mjx_converged,columns,evaluation
 All take --resolution (grid, m) and --cells (indices into CELLS); gt takes --terrain
-boxes|heightfield (heightfield: CPU MuJoCo on the very heightfield MJX sees). `first`: from the
+boxes|heightfield (heightfield: CPU MuJoCo on the very heightfield MJX sees) and --timeconst
+(every geom's contact solref time constant, for the option evaluation_stiff). `first`: from the
 same states on the stairs (the policy's, after 2 s in the ground truth) the same actions for one
 second in the ground truth and, replayed open-loop, in each option (study.ground_truth.
 first_second): base position error and net vertical contact force, per cell and policy.
@@ -58,6 +59,10 @@ OPTIONS = {  # env overrides of each physics option
     # (issue 19, experiments/gt_sunk_exit.py): the evaluation physics since 2026-11-25
     # (mjx_evaluation_exit/), the preset robot.physics=evaluation
     "evaluation_exit": ("robot.physics=evaluation",),
+    # the same with every geom's contact solref time constant at 0.01 s in place of go2.xml's
+    # 0.02 (robot.contact_timeconst; issue 19's spiral study): judged against the ground truth
+    # run with the same contact (`gt --timeconst 0.01`), not the default one
+    "evaluation_stiff": ("robot.physics=evaluation", "robot.contact_timeconst=0.01"),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
     # (8): is a few iterations' convergence enough? With today's evaluation physics's sunk rule
     # (nearest face; their speed, run.sh step bench-options, was measured 2026-11-25 with the
@@ -130,7 +135,7 @@ def run_mjx(out: Path, robots: int, options: list[str], cells: list, res: float)
 
 
 def _gt_task(args) -> str:
-    policy_name, cell, robots, out, res, terrain, seed, nthread = args
+    policy_name, cell, robots, out, res, terrain, seed, nthread, timeconst = args
     from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study.evaluate import CellSpec
     from mjx_stairs.study.ground_truth import success_in_ground_truth
@@ -138,22 +143,25 @@ def _gt_task(args) -> str:
     path = Path(out) / f"gt_{policy_name}_{cell[0]}_{cell[1]}_{cell[2] + 1}.json"
     if path.exists():
         return f"{path.name} (kept)"
-    spec = CellSpec(cells=(cell,), robots_per_cell=robots, env_overrides=OPTIONS["reference"],
-                    resolution=res, seed=seed)
+    extra = (f"robot.contact_timeconst={timeconst}",) if timeconst else ()
+    spec = CellSpec(cells=(cell,), robots_per_cell=robots, resolution=res, seed=seed,
+                    env_overrides=OPTIONS["reference"] + extra)
     rec = success_in_ground_truth(load_policy(KNOWN_POLICIES[policy_name]), spec,
                                   nthread=nthread, terrain=terrain)
-    rec["policy"] = policy_name
+    rec.update(policy=policy_name, contact_timeconst=timeconst)
     write(path, rec)
     return f"{path.name}: {100 * rec['success'][0]:.1f} % ({rec['wall_s']:.0f} s)"
 
 
 def run_gt(out: Path, robots: int, workers: int, cells: list, res: float, terrain: str,
-           seed: int = 0, policies: tuple[str, ...] = tuple(POLICIES)) -> None:
+           seed: int = 0, policies: tuple[str, ...] = tuple(POLICIES),
+           timeconst: float = 0.0) -> None:
     """Each policy on each cell in CPU MuJoCo, one task per process; fewer tasks than workers:
-    the spare workers become MuJoCo threads of each task."""
+    the spare workers become MuJoCo threads of each task. `timeconst` > 0: every geom's contact
+    solref time constant (robot.contact_timeconst), as MJX's option evaluation_stiff."""
     n = len(cells) * len(policies)
     nthread = max(1, workers // max(1, n))
-    tasks = [(p, c, robots, str(out), res, terrain, seed, nthread) for c in cells
+    tasks = [(p, c, robots, str(out), res, terrain, seed, nthread, timeconst) for c in cells
              for p in policies]
     ctx = multiprocessing.get_context("spawn")
     with ctx.Pool(workers) as pool:
@@ -199,6 +207,8 @@ def main() -> None:
     ap.add_argument("--policies", default=",".join(POLICIES), help="for first and gt")
     ap.add_argument("--seed", type=int, default=0, help="for gt: the robots' starts (as eval's)")
     ap.add_argument("--terrain", default="boxes", choices=("boxes", "heightfield"))
+    ap.add_argument("--timeconst", type=float, default=0.0,
+                    help="for gt: every geom's contact solref time constant (0: go2.xml's 0.02)")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     cells = [CELLS[int(i)] for i in a.cells.split(",")] if a.cells else CELLS
@@ -210,7 +220,7 @@ def main() -> None:
     else:
         os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
         run_gt(a.out, a.robots or 200, a.workers, cells, a.resolution, a.terrain, a.seed,
-               a.policies.split(","))
+               a.policies.split(","), a.timeconst)
 
 
 if __name__ == "__main__":

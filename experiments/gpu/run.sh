@@ -187,7 +187,7 @@ fidelity_mjx() {  # fidelity_mjx OPTION [x64]: fidelity.py mjx (1000 robots per 
   [ "$(left)" -lt 90 ] && { echo "no time left for $opt"; return; }
   mkdir -p "$OUT/ground_truth"
   env "${env[@]}" timeout $(( $(left) - 15 )) python3 experiments/gpu/fidelity.py mjx \
-    "$OUT/ground_truth/$dir" --options "$opt" --cells "${FIDELITY_CELLS:-}" 2>&1 | grep -v warp \
+    "$OUT/ground_truth/$dir" --options "$opt" --cells "${FIDELITY_CELLS//+/,}" 2>&1 | grep -v warp \
     | tee -a "$OUT/ground_truth/$dir.log"
 }
 

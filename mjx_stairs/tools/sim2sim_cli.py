@@ -33,7 +33,8 @@ def command(args: argparse.Namespace) -> int:
     options = sim2sim.Options(
         episodes=args.episodes, seed=args.seed, episode_s=args.episode_s,
         latency_ms=args.latency_ms, noise=args.noise, push=args.push,
-        push_speed=args.push_speed, push_every_s=args.push_every)
+        push_speed=args.push_speed, push_every_s=args.push_every,
+        contact_timeconst=args.contact_timeconst)
     r = sim2sim.run(args.onnx, course, options, robot=args.robot, video=args.video,
                     mcap=args.mcap, out=args.out)
     edges = ", ".join(f"{k} {v:.2f}" for k, v in r["edge_contacts_per_episode"].items())
@@ -69,6 +70,10 @@ def add_parser(sub) -> None:
     s.add_argument("--push", action="store_true", help="planar velocity kicks to the base")
     s.add_argument("--push-speed", type=float, default=0.5, help="kick (m/s)")
     s.add_argument("--push-every", type=float, default=4.0, help="seconds between kicks")
+    s.add_argument("--contact-timeconst", type=float, default=0.0, metavar="S",
+                   help="every geom's contact solref time constant, robot and stairs (0: the "
+                   "MJCF's, MuJoCo's default 0.02 s); the sidecar's training.contact_timeconst_s "
+                   "says what the policy trained with")
     s.add_argument("--robot", default=None, help="a Go2 MJCF with Unitree's joint names and "
                    "torque motors (default: ours, mjx_stairs/sim/assets/go2_full.xml)")
     s.add_argument("--resolution", type=float, default=0.025, help="stair grid (m)")

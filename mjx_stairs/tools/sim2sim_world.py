@@ -105,11 +105,14 @@ def edge_mask(heights: np.ndarray, resolution: float) -> np.ndarray:
 
 def build_world(contract: Contract, heights: np.ndarray, resolution: float,
                 robot: str | os.PathLike | None = None, terrain: str = "boxes",
-                pad: float = 3.0) -> World:
+                pad: float = 3.0, contact_timeconst: float = 0.0) -> World:
     """The robot among the staircase `heights` [ny, nx] (grid point (ix, iy) at world
     (ix * res, iy * res)), padded by `pad` m of edge heights on every side (what the training
     env's height map reads past a tile's edge). `terrain`: "boxes" or "heightfield" (the grid
-    as a MuJoCo heightfield, unpadded: for the contract test)."""
+    as a MuJoCo heightfield, unpadded: for the contract test). `contact_timeconst` > 0: every
+    geom's solref (timeconst, 1), robot and stairs (a contact mixes its two geoms'), in place of
+    the MJCF's (MuJoCo's default 0.02 s): the stiffer contact of issue 19's spiral study, as the
+    training option env.robot.contact_timeconst sets it in MJX."""
     spec = _load_spec(robot)
     if robot is None:
         spec.option.timestep = contract.physics_dt
@@ -126,6 +129,12 @@ def build_world(contract: Contract, heights: np.ndarray, resolution: float,
         _add_boxes(spec, grid_boxes(grid, resolution, origin=tuple(origin)))
     else:
         raise ValueError(f"terrain must be 'boxes' or 'heightfield', got {terrain!r}")
+    if contact_timeconst < 0:
+        raise ValueError(f"contact_timeconst must be 0 (the MJCF's) or > 0 s, got "
+                         f"{contact_timeconst}")
+    if contact_timeconst:  # after the last geom is added
+        for g in spec.geoms:
+            g.solref = [contact_timeconst, 1.0]
     try:
         model = spec.compile()
     except Exception as e:

@@ -132,6 +132,7 @@ def test_transfer_matrix_and_transferability(trained, tmp_path, monkeypatch):
     cell = result["success"]["u_shaped"]["u_shaped"]
     assert cell["physics_settings"]["terrain_contacts"] == "columns"
     assert cell["physics_settings"]["sunk_exit"] == "nearest"  # the evaluation physics
+    assert cell["physics_settings"]["contact_timeconst"] == 0.0  # the MJCF's contact
     # a matrix run again over the same folder keeps its finished cells (a killed run resumes)
     def no_evaluation(*_):
         raise AssertionError("a finished cell was evaluated again")

@@ -302,6 +302,25 @@ def test_the_full_robot_stands_on_box_stairs(onnx_file):
     assert touching == {"foot"} and not sim.fallen()
 
 
+def test_a_stiffer_contact_sinks_the_feet_less(onnx_file):
+    """contact_timeconst sets every geom's solref, robot and stairs; standing in the nominal
+    pose, the feet's penetration into the boxes falls with the time constant (about as its
+    square: MuJoCo's contact spring is ~1/timeconst^2)."""
+    c = ct.load_contract(onnx_file)
+    course = s2s.family_course("u_shaped", 3, resolution=0.05)
+    depth = {}
+    for tc in (0.0, 0.01):
+        w = sw.build_world(c, course.heights, 0.05, contact_timeconst=tc)
+        assert np.allclose(w.model.geom_solref, [tc or 0.02, 1.0])
+        sim = s2s.Sim(c, lambda obs: np.zeros(12), w, course)
+        sim.reset(*course.spawn[[0, 1, 5]])
+        for _ in range(100):
+            sim.act(np.zeros(c.obs_size))
+        assert not sim.fallen()
+        depth[tc] = -np.mean(w.data.contact.dist[:w.data.ncon])
+    assert depth[0.0] > 0 and depth[0.01] < 0.5 * depth[0.0], depth
+
+
 # ----------------------------------------------------------------------------- runner options
 
 
@@ -418,12 +437,13 @@ def test_cli_runs_short_episodes_with_every_option(onnx_file, tmp_path, capsys):
     code = cli.main(["sim2sim", "--onnx", str(onnx_file), "--family", "u_shaped", "--level", "2",
                      "--resolution", "0.05", "--episodes", "2", "--episode-s", "0.6",
                      "--latency-ms", "20", "--noise", "--push", "--push-every", "0.2",
-                     "--out", str(out), "--mcap", str(mcap)])
+                     "--contact-timeconst", "0.01", "--out", str(out), "--mcap", str(mcap)])
     assert code == 0
     assert "u_shaped_test_2_up: success" in capsys.readouterr().out
     r = json.loads(out.read_text())
     assert r["episodes"] == 2 and len(r["records"]) == 2
     assert r["options"]["latency_ms"] == 20.0 and r["options"]["noise"] and r["options"]["push"]
+    assert r["options"]["contact_timeconst"] == 0.01
     for rec in r["records"]:
         assert rec["outcome"] in ("timeout", "fell", "success")
         assert 0 < rec["time_s"] <= 0.6 + 1e-9
@@ -543,6 +563,8 @@ BAD = {
                     "not a torque motor"),
     "missing robot": (lambda f, t: ["--onnx", str(f), "--robot", str(t / "go2.xml")],
                       "no such robot MJCF"),
+    "negative timeconst": (lambda f, t: ["--onnx", str(f), "--contact-timeconst", "-0.01"],
+                           "contact_timeconst must be"),
 }
 EDITS = {
     "missing sidecar": lambda p: ct.sidecar_path(p).unlink(),
