@@ -29,3 +29,30 @@ def test_the_gap_interval_covers_95_percent_of_equal_rates():
         b = sum(rng.random() < p for _ in range(n)) / n
         misses += 100 * abs(a - b) > fidelity_table.gap_interval(a, n, b, n)
     assert 4 <= misses <= 40  # about 5 % of 400
+
+
+def _write(path: Path, record: dict) -> None:
+    import json
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record))
+
+
+def test_the_stiff_table_judges_each_contact_against_its_own_ground_truth(tmp_path, capsys):
+    cells = [{"family": "u_shaped", "schedule": "test", "level": 6},
+             {"family": "straight", "schedule": "extended", "level": 5}]
+    for folder, rates in (("mjx_evaluation_exit", [0.99, 0.37]),
+                          ("mjx_evaluation_stiff", [0.98, 0.50])):
+        _write(tmp_path / folder / f"{folder}.json", {"option": folder[4:], "policies": {
+            "stage2_u": {"cells": cells, "success": rates, "robots_per_cell": 1000}}})
+    for folder, cell, rate in (("gt_supported", 0, 1.0), ("gt_supported", 1, 0.395),
+                               ("gt_supported_stiff", 0, 0.97),
+                               ("gt_supported_stiff1000", 1, 0.43)):
+        _write(tmp_path / folder / f"gt_{cell}.json", {
+            "policy": "stage2_u", "cells": [cells[cell]], "success": [rate],
+            "robots_per_cell": 1000 if folder.endswith("1000") else 200})
+    fidelity_table.stiff_table(tmp_path)
+    out = capsys.readouterr().out
+    assert "| stage2_u | straight extended L5 | 39.5 ±6.8 (200) | 37.0 (-2.5) | " \
+           "43.0 ±3.1 (1000) | 50.0 (+7.0) |" in out
+    assert "0.02 s: 2.5 points (2 of 2 cells within 3), 0.01 s: 7.0 points (1 of 2" in out

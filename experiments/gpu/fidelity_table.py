@@ -1,6 +1,7 @@
 """Fidelity table of issue 19 from experiments/gpu/fidelity.py's output folders.
 
   python experiments/gpu/fidelity_table.py experiments/results/ground_truth [--before] > TABLE.md
+  python experiments/gpu/fidelity_table.py experiments/results/ground_truth --stiff > STIFF.md
 
 Ground truth: gt_supported/ (the box staircase with a support under every box's top, d08b354:
 no foot is held sunk in a seam between boxes; 200 episodes per cell), gt_supported1000/ (1000,
@@ -40,9 +41,10 @@ def gap_interval(g: float, n: int, s: float, m: int) -> float:
     return 100 * 1.96 * math.sqrt(var)
 
 
-def _ground_truth(root: Path, before: bool = False) -> dict:
+def _ground_truth(root: Path, before: bool = False, folders: tuple[str, ...] = ()) -> dict:
     gt = {}
-    for folder in (("gt", "gt1000") if before else ("gt_supported", "gt_supported1000")):
+    folders = folders or (("gt", "gt1000") if before else ("gt_supported", "gt_supported1000"))
+    for folder in folders:
         # the later folder (more episodes) wins
         for f in sorted((root / folder).glob("gt_*.json")):
             r = json.loads(f.read_text())
@@ -102,5 +104,46 @@ def main(root: Path, before: bool = False) -> None:
           + ", ".join(f"{o} {beyond[o]} of {k}" for o, (_, k) in worst.items()))
 
 
+def stiff_table(root: Path) -> None:
+    """Long: the evaluation physics at both contacts, each against the ground truth at its own:
+    go2.xml's solref time constant 0.02 s (evaluation_exit against gt_supported[1000]/) and 0.01
+    s in both simulators (evaluation_stiff against gt_supported_stiff[1000]/, fidelity.py gt
+    --timeconst 0.01), on the cells measured at 0.01."""
+    pairs = (("0.02", "mjx_evaluation_exit", ("gt_supported", "gt_supported1000")),
+             ("0.01", "mjx_evaluation_stiff", ("gt_supported_stiff", "gt_supported_stiff1000")))
+    cols = []
+    for label, folder, gt_folders in pairs:
+        rec = json.loads(next((root / folder).glob("mjx_*.json")).read_text())["policies"]
+        cols.append((label, rec, _ground_truth(root, folders=gt_folders)))
+    print("| policy | cell | " + " | ".join(f"ground truth {t} (n) | MJX {t} (gap)"
+                                           for t, _, _ in cols) + " |")
+    print("|---|---|" + "---|---|" * len(cols))
+    worst = {t: [0.0, 0, 0] for t, _, _ in cols}  # largest gap, cells, cells within 3
+    for policy, rec in cols[-1][1].items():
+        for c in rec["cells"]:
+            key = (policy, c["family"], c["schedule"], c["level"])
+            row = []
+            for t, mjx, gt in cols:
+                recs = mjx[policy]
+                s = recs["success"][recs["cells"].index(c)]
+                g, n = gt.get(key, (None, 0))
+                if g is None:
+                    row += ["–", f"{100 * s:.1f}"]
+                    continue
+                row += [f"{100 * g:.1f} ±{interval(g, n):.1f} ({n})", f"{100 * s:.1f} "
+                        f"({100 * (s - g):+.1f})"]
+                w = worst[t]
+                w[0], w[1], w[2] = max(w[0], abs(s - g)), w[1] + 1, w[2] + (abs(s - g) <= 0.03)
+            name = f"{c['family']} {c['schedule']} L{c['level']}"
+            print(f"| {policy} | {name} | " + " | ".join(row) + " |")
+    print()
+    print("MJX: 1000 robots per cell. Largest |MJX - ground truth| at each contact: "
+          + ", ".join(f"{t} s: {100 * w:.1f} points ({k3} of {k} cells within 3)"
+                      for t, (w, k, k3) in worst.items()))
+
+
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), before="--before" in sys.argv[2:])
+    if "--stiff" in sys.argv[2:]:
+        stiff_table(Path(sys.argv[1]))
+    else:
+        main(Path(sys.argv[1]), before="--before" in sys.argv[2:])

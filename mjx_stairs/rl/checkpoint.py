@@ -111,19 +111,24 @@ def load_metadata(path: str | Path) -> dict[str, Any]:
     return _open(Path(path))[1]
 
 
-def compact(src: str | Path, dst: str | Path, zero: tuple[str, ...] = ()) -> None:
+def compact(src: str | Path, dst: str | Path, zero: tuple[str, ...] = (),
+            set_to: dict[str, Any] | None = None) -> None:
     """Rewrite checkpoint ``src`` to ``dst`` (may be ``src``) compressed, with the entries named
-    in ``zero`` (tree paths, e.g. ``".env_state['obs']"``) set to zeros of their shape and dtype;
+    in ``zero`` (tree paths, e.g. ``".env_state['obs']"``) set to zeros of their shape and dtype
+    and those in ``set_to`` to the values given (each broadcast to the entry's shape and dtype);
     metadata and every other entry unchanged, written atomically. For a training state that must
     travel: its observation buffer is the largest entry and compresses worst (a resumed run's first
-    step then acts on a zero observation). A name in ``zero`` that is not an entry is an error."""
+    step then acts on a zero observation); ``set_to``: a state changed before it is resumed (e.g.
+    experiments/reset_state_std.py). A name that is not an entry is an error."""
     src, dst = Path(src), Path(dst)
     arrays, meta = _open(src)
-    missing = [k for k in zero if k not in arrays]
+    values = {k: 0 for k in zero} | dict(set_to or {})
+    missing = [k for k in values if k not in arrays]
     if missing:
-        raise CheckpointError(f"{src}: no entry {missing[0]} to zero")
-    for k in zero:
-        arrays[k] = np.zeros_like(arrays[k])
+        verb = "zero" if missing[0] in zero else "set"
+        raise CheckpointError(f"{src}: no entry {missing[0]} to {verb}")
+    for k, v in values.items():
+        arrays[k] = np.broadcast_to(np.asarray(v), arrays[k].shape).astype(arrays[k].dtype)
     arrays[META_KEY] = _meta_entry(meta)
     dst.parent.mkdir(parents=True, exist_ok=True)
     _write(dst, arrays, compressed=True)

@@ -139,3 +139,9 @@ def test_compact_zeroes_named_entries_and_keeps_the_rest(tmp_path):
     assert dst.stat().st_size < src.stat().st_size / 4
     with pytest.raises(CheckpointError, match="no entry"):
         checkpoint.compact(src, dst, zero=("['nope']",))
+    # set_to: a value broadcast to the entry's shape and dtype, the rest as before
+    checkpoint.compact(src, dst, zero=("['obs']",), set_to={"['w']": 0.5})
+    out, _ = checkpoint.load(dst, template=jax.eval_shape(lambda: tree))
+    assert np.all(out["w"] == 0.5) and out["w"].dtype == jnp.float32 and np.all(out["obs"] == 0)
+    with pytest.raises(CheckpointError, match="no entry .* to set"):
+        checkpoint.compact(src, dst, set_to={"['nope']": 1.0})
