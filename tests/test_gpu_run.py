@@ -72,6 +72,29 @@ def test_code_suite_step_runs_every_step_asked_for(tmp_path, variables, expected
 
 
 @pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+@pytest.mark.parametrize("variables, expected", [
+    ({"FIDELITY_OPTIONS": "evaluation_stiff", "FIDELITY_CELLS": "5+6+17"},
+     "--options evaluation_stiff --cells 5,6,17"),
+    ({}, "--options evaluation --cells "),  # unset: every cell (run.sh runs under set -u)
+])
+def test_fidelity_step_passes_its_cells(tmp_path, variables, expected):
+    """fidelity passes FIDELITY_CELLS as fidelity.py's comma list (a gpuN: token cannot hold a
+    comma; 2026-11-28 the a+b form reached fidelity.py unconverted). python3 records its
+    arguments."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    calls = tmp_path / "calls.txt"
+    (bin_dir / "python3").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n')
+    (bin_dir / "python3").chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
+           "HOME": str(tmp_path), **variables}
+    subprocess.run(["bash", str(RUN), "200", "fidelity"], env=env, capture_output=True,
+                   text=True, timeout=60, cwd=RUN.parents[2], check=True)
+    (call,) = [c for c in calls.read_text().splitlines() if "fidelity.py mjx" in c]
+    assert call.endswith(expected), call
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
 def test_wait_policy_waits_for_a_run_published_in_this_command(tmp_path):
     """A group's wait-policy step returns once another group's run is published
     (/tmp/policies/NAME.npz written after the command started), and gives up near the deadline

@@ -178,7 +178,7 @@ collect() {  # wait for the background jobs (until 10 s before the deadline), th
 
 fidelity_mjx() {  # fidelity_mjx OPTION [x64]: fidelity.py mjx (1000 robots per cell) into the
   # option's published folder under $OUT/ground_truth/, FIDELITY_CELLS (default: every cell)
-  local opt=$1 x64=${2:-} dir env=()
+  local opt=$1 x64=${2:-} dir env=() cells=${FIDELITY_CELLS:-}
   case $opt in
     reference|lean|nearest_full) dir=mjx ;; columns|columns_converged) dir=mjx_columns ;;
     evaluation) dir=mjx_eval ;; *) dir=mjx_$opt ;;
@@ -187,7 +187,7 @@ fidelity_mjx() {  # fidelity_mjx OPTION [x64]: fidelity.py mjx (1000 robots per 
   [ "$(left)" -lt 90 ] && { echo "no time left for $opt"; return; }
   mkdir -p "$OUT/ground_truth"
   env "${env[@]}" timeout $(( $(left) - 15 )) python3 experiments/gpu/fidelity.py mjx \
-    "$OUT/ground_truth/$dir" --options "$opt" --cells "${FIDELITY_CELLS//+/,}" 2>&1 | grep -v warp \
+    "$OUT/ground_truth/$dir" --options "$opt" --cells "${cells//+/,}" 2>&1 | grep -v warp \
     | tee -a "$OUT/ground_truth/$dir.log"
 }
 
@@ -480,7 +480,7 @@ run_step() {
     # 36 fidelity cells, into the published folders under $OUT/ground_truth/. FIDELITY_OPTIONS
     # (default evaluation: mjx_eval/, section 1's evaluation-physics row and the fidelity table's
     # last row; columns,columns_converged: mjx_columns/; reference,lean,nearest_full: mjx/;
-    # mjx_converged: mjx_converged/), FIDELITY_CELLS (indices into fidelity.py's CELLS; default
+    # mjx_converged: mjx_converged/), FIDELITY_CELLS (indices into fidelity.py's CELLS, a+b; default
     # every one; the published float32 columns_converged: 8,9,15,16,17). fidelity-x64: the same
     # with the physics in float64 (JAX_ENABLE_X64=1; default columns_converged on every cell,
     # mjx_x64/). fidelity_table.py (no GPU) rebuilds ground_truth/table.md from the folders
