@@ -36,6 +36,10 @@ RQ1_POLICIES = {n: f"experiments/results/{n}/policy.npz" for n in (
 OTHER_POLICIES = {  # for `gt --policies` (not in the fidelity table)
     "time_to_climber": "experiments/results/time_to_climber/stage2/policy.npz",  # issue 22
     "stage2_u_evaluation_exit_s0": "experiments/results/stage2_u_evaluation_exit_s0/policy.npz",
+    # issue 19's next step (docs/results.md 8q): stage 2 trained at the stiffer contact (run.sh
+    # PHYSICS_OPTION=evaluation_stiff,stage2-physics, SEED 0 and 1), for `gt --timeconst 0.01`
+    **{f"stage2_u_evaluation_stiff_s{s}": f"experiments/results/stage2_u_evaluation_stiff_s{s}/"
+       "policy.npz" for s in (0, 1)},
 }
 KNOWN_POLICIES = {**POLICIES, **RQ1_POLICIES, **OTHER_POLICIES}
 OPTIONS = {  # env overrides of each physics option
