@@ -48,6 +48,22 @@ def test_gpu_groups_run_their_steps_pinned_with_their_variables(tmp_path):
     assert "== gpu1.log:" in run.stdout  # waited for, and its log shown
 
 
+def _python_call(tmp_path, step: str, variables: dict, marker: str) -> str:
+    """run.sh's STEP with VARIABLES, python3 a stand-in that records its arguments: the one
+    recorded call containing MARKER."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    calls = tmp_path / "calls.txt"
+    (bin_dir / "python3").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n')
+    (bin_dir / "python3").chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
+           "HOME": str(tmp_path), **variables}
+    subprocess.run(["bash", str(RUN), "200", step], env=env, capture_output=True,
+                   text=True, timeout=60, cwd=RUN.parents[2], check=True)
+    (call,) = [c for c in calls.read_text().splitlines() if marker in c]
+    return call
+
+
 @pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
 @pytest.mark.parametrize("variables, expected", [
     ({"CODE_POLICIES": "a+b=x.npz", "CODE_MESH": "c"},
@@ -58,16 +74,7 @@ def test_gpu_groups_run_their_steps_pinned_with_their_variables(tmp_path):
 def test_code_suite_step_runs_every_step_asked_for(tmp_path, variables, expected):
     """code-suite passes one --steps for both CODE_POLICIES and CODE_MESH (two --steps flags
     ran the last one only, 2026-11-27). python3 is a stand-in that records its arguments."""
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    calls = tmp_path / "calls.txt"
-    (bin_dir / "python3").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n')
-    (bin_dir / "python3").chmod(0o755)
-    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
-           "HOME": str(tmp_path), **variables}
-    subprocess.run(["bash", str(RUN), "200", "code-suite"], env=env, capture_output=True,
-                   text=True, timeout=60, cwd=RUN.parents[2], check=True)
-    (call,) = [c for c in calls.read_text().splitlines() if "code_suite.py" in c]
+    call = _python_call(tmp_path, "code-suite", variables, "code_suite.py")
     assert call.endswith(expected), call
 
 
@@ -81,16 +88,7 @@ def test_fidelity_step_passes_its_cells(tmp_path, variables, expected):
     """fidelity passes FIDELITY_CELLS as fidelity.py's comma list (a gpuN: token cannot hold a
     comma; 2026-11-28 the a+b form reached fidelity.py unconverted). python3 records its
     arguments."""
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    calls = tmp_path / "calls.txt"
-    (bin_dir / "python3").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n')
-    (bin_dir / "python3").chmod(0o755)
-    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
-           "HOME": str(tmp_path), **variables}
-    subprocess.run(["bash", str(RUN), "200", "fidelity"], env=env, capture_output=True,
-                   text=True, timeout=60, cwd=RUN.parents[2], check=True)
-    (call,) = [c for c in calls.read_text().splitlines() if "fidelity.py mjx" in c]
+    call = _python_call(tmp_path, "fidelity", variables, "fidelity.py mjx")
     assert call.endswith(expected), call
 
 

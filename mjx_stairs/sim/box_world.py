@@ -19,8 +19,8 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
-from mjx_stairs.sim import contact
 from mjx_stairs.sim import robot as rb
+from mjx_stairs.sim import solref
 
 STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 """What a rollout carries from one policy step to the next: time, qpos, qvel, act, ... ."""
@@ -79,7 +79,7 @@ def build_model(
     rb.set_joint_damping(spec, config)
     if config.head_collision:
         rb.add_head(spec)
-    contact.set_timeconst(spec, config.contact_timeconst)
+    solref.set_timeconst(spec, config.contact_timeconst)
     if not config.shin_collision:
         for name in rb.SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0

@@ -324,15 +324,6 @@ def set_exit_study(rule: str) -> None:
     _NEAREST, _BY_NAME = _colliders(_collide.ncon, rule)
 
 
-def set_timeconst(spec, timeconst: float) -> None:
-    """Every geom of `spec` (robot and terrain: a contact mixes its two geoms' solref) with the
-    solref (timeconst, 1), critically damped; 0 leaves the MJCF's (MuJoCo's default 0.02 s).
-    Call it after the last geom is added (RobotConfig.contact_timeconst)."""
-    if timeconst:
-        for geom in spec.geoms:
-            geom.solref = [timeconst, 1.0]
-
-
 def register() -> None:
     """Make MJX collide (heightfield, ellipsoid) pairs with `sphere_heightfield` or
     `sphere_columns` (idempotent)."""

@@ -22,7 +22,7 @@ from mujoco import mjx
 from mujoco.mjx._src import collision_driver
 
 from mjx_stairs.config import ConfigError
-from mjx_stairs.sim import contact  # registers the 'nearest' and 'columns' terrain colliders
+from mjx_stairs.sim import contact, solref  # contact registers the 'nearest', 'columns' colliders
 
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
 
@@ -233,7 +233,7 @@ def build_mj_model(
     set_joint_damping(spec, config)
     if config.head_collision:
         add_head(spec)
-    contact.set_timeconst(spec, config.contact_timeconst)
+    solref.set_timeconst(spec, config.contact_timeconst)
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0

@@ -24,10 +24,10 @@ from mjx_stairs.env import observation
 from mjx_stairs.env.config import EnvConfig, env_config_from
 from mjx_stairs.rl.policy import STD_EPS, Policy, normaliser_constants, saved_config
 from mjx_stairs.sim import robot as rb
+from mjx_stairs.sim import solref
 
 FORMAT = "mjx_stairs policy sidecar v2"
 OPSET = 17
-MJCF_TIMECONST_S = 0.02  # go2.xml's contact solref time constant (MuJoCo's default)
 
 SDK_LEGS = ("FR", "FL", "RR", "RL")
 SDK_JOINT_NAMES = tuple(f"{leg}_{part}_joint" for leg in SDK_LEGS
@@ -114,7 +114,7 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         "joint_damping_integration": "implicit" if cfg.robot.implicit_damping else "explicit",
         "head_collision": cfg.robot.head_collision,
         # every contact's solref time constant (robot and stairs); the MJCF's is MuJoCo's default
-        "contact_timeconst_s": cfg.robot.contact_timeconst or MJCF_TIMECONST_S,
+        "contact_timeconst_s": cfg.robot.contact_timeconst or solref.MJCF_TIMECONST_S,
         "action_delay_s": list(r.action_delay_s) if r.enabled and r.action_delay_s[1] > 0
         else [cfg.robot.action_delay_s] * 2,
         "pushes": None if not (r.enabled and r.push_interval_s > 0) else {

@@ -18,6 +18,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from mjx_stairs.sim import solref
 from mjx_stairs.tools.contract import Contract
 from terrains.boxes import grid_boxes
 
@@ -132,9 +133,7 @@ def build_world(contract: Contract, heights: np.ndarray, resolution: float,
     if contact_timeconst < 0:
         raise ValueError(f"contact_timeconst must be 0 (the MJCF's) or > 0 s, got "
                          f"{contact_timeconst}")
-    if contact_timeconst:  # after the last geom is added
-        for g in spec.geoms:
-            g.solref = [contact_timeconst, 1.0]
+    solref.set_timeconst(spec, contact_timeconst)  # after the last geom is added
     try:
         model = spec.compile()
     except Exception as e:
