@@ -60,12 +60,13 @@ OPTIONS = {  # env overrides of each physics option
     # the evaluation physics as published to 2026-11-24 (mjx_eval/): columns_converged
     "evaluation": ("robot.physics=evaluation_top",),
     # the same, a sunk sphere centre pushed out through the nearest exposed face of its column
-    # (issue 19, experiments/gt_sunk_exit.py): the evaluation physics since 2026-11-25
-    # (mjx_evaluation_exit/), the preset robot.physics=evaluation
-    "evaluation_exit": ("robot.physics=evaluation",),
+    # (issue 19, experiments/gt_sunk_exit.py): the evaluation physics 2026-11-25 to 11-28
+    # (mjx_evaluation_exit/), the preset robot.physics=evaluation_soft
+    "evaluation_exit": ("robot.physics=evaluation_soft",),
     # the same with every geom's contact solref time constant at 0.01 s in place of go2.xml's
     # 0.02 (robot.contact_timeconst; issue 19's spiral study): judged against the ground truth
-    # run with the same contact (`gt --timeconst 0.01`), not the default one
+    # run with the same contact (`gt --timeconst 0.01`), not the default one; the evaluation
+    # physics since 2026-11-28 (mjx_evaluation_stiff/), the preset robot.physics=evaluation
     "evaluation_stiff": ("robot.physics=evaluation", "robot.contact_timeconst=0.01"),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
     # (8): is a few iterations' convergence enough? With today's evaluation physics's sunk rule
@@ -86,15 +87,15 @@ OPTIONS = {  # env overrides of each physics option
     # fewer line-search steps: under vmap MJX runs every one of them for every robot (a scan of
     # lax.cond, which vmap turns into both branches), so a Newton iteration costs about
     # ls_iterations line-search bodies whether or not the search has converged
-    "columns_n4_ls3": ("robot.physics=evaluation", "robot.solver_iterations=4",
+    "columns_n4_ls3": ("robot.physics=evaluation_soft", "robot.solver_iterations=4",
                        "robot.ls_iterations=3"),
-    "columns_n6_ls3": ("robot.physics=evaluation", "robot.solver_iterations=6",
+    "columns_n6_ls3": ("robot.physics=evaluation_soft", "robot.solver_iterations=6",
                        "robot.ls_iterations=3"),
-    "columns_n8_ls3": ("robot.physics=evaluation", "robot.solver_iterations=8",
+    "columns_n8_ls3": ("robot.physics=evaluation_soft", "robot.solver_iterations=8",
                        "robot.ls_iterations=3"),
     # ... and with a 10 ms physics step (PD and contacts at 100 Hz, 2 steps per 20 ms policy
     # step, half the physics of every candidate above; issue 22)
-    "evaluation_dt10": ("robot.physics=evaluation", "robot.timestep=0.01", "decimation=2"),
+    "evaluation_dt10": ("robot.physics=evaluation_soft", "robot.timestep=0.01", "decimation=2"),
     "columns_n4_dt10": ("robot.terrain_contacts=columns", "robot.shin_collision=true",
                         "robot.solver_iterations=4", "robot.ls_iterations=8",
                         "robot.sunk_exit=nearest", "robot.timestep=0.01", "decimation=2"),

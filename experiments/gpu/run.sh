@@ -443,7 +443,7 @@ run_step() {
           timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --family $fam \
             --schedule extended --robots 1000 --out "$d/$fam" 2>&1 | grep -v warp
         done
-        [ -f "$d/code.json" ] && continue
+        [ -f "$d/code.json" ] || [ "${PHYSICS_CODE:-1}" = 0 ] && continue  # 0: extended only
         [ "$(left)" -lt 240 ] && { echo "no time left for $name code"; break; }
         timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --suite code \
           --robots 1000 --episode-s 30 --out "$d/code.json" 2>&1 | grep -v warp
@@ -581,14 +581,18 @@ run_step() {
     # the RQ1 policies beside stage2_u (whose re-evaluation is step fidelity's mjx_eval/): the
     # no-stall ablation and the paper's final goal with and without the stall penalty, into
     # $OUT/rq_eval
-    transfer-eval)  # resumes from the committed cells (transfer_lean/evaluation_exit/cells/)
+    transfer-eval)  # resumes from the committed cells (transfer_lean/evaluation*/cells/: a cell
+      # judged in other physics than the preset's today is judged again); TE_ROWS (a+b): those
+      # models' rows only (one GPU's part; the run without it assembles the kept cells)
       [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       mkdir -p "$OUT/transfer_lean_eval"
-      [ -d experiments/results/transfer_lean/evaluation_exit/cells ] && cp -rn \
-        experiments/results/transfer_lean/evaluation_exit/cells "$OUT/transfer_lean_eval/"
+      for d in experiments/results/transfer_lean/evaluation*/cells; do
+        [ -d "$d" ] && cp -rn "$d" "$OUT/transfer_lean_eval/"
+      done
+      part=(); [ -n "${TE_ROWS:-}" ] && part+=(--rows ${TE_ROWS//+/ })
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs transfer-matrix \
         --config experiments/results/transfer_lean/models.toml --robots 1000 \
-        --out "$OUT/transfer_lean_eval" 2>&1 | grep -v warp ;;
+        --out "$OUT/transfer_lean_eval" "${part[@]}" 2>&1 | grep -v warp ;;
     rq1-eval)
       [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint \

@@ -53,14 +53,13 @@ JOINT_DAMPING = 0.1
 
 NOMINAL_BASE_HEIGHT = 0.30
 """Approximate base height above flat ground in the nominal pose (m)."""
-
-# Collision sphere groups by geom name suffix.
 SPHERE_GROUPS = {
     "foot": tuple(f"{leg}_foot" for leg in LEGS),
     "knee": tuple(f"{leg}_knee" for leg in LEGS),
     "shin": tuple(f"{leg}_shin" for leg in LEGS),
     "trunk": ("trunk_fl", "trunk_fr", "trunk_rl", "trunk_rr"),
 }
+"""Collision sphere groups by geom name suffix."""
 
 HEAD = ("trunk_head", (0.293, 0.0, -0.06), 0.047)
 """(name, position in the base frame, radius) of the head sphere that `RobotConfig.head_collision`
@@ -92,23 +91,19 @@ class RobotConfig:
     # N m s/rad on every leg joint (None: the MJCF's JOINT_DAMPING); e.g. evaluating at the Go2
     # description's 2: --env robot.joint_damping=2 (env.randomization.joint_damping draws it)
     joint_damping: float | None = None
-    # Integrate the joints' passive damping implicitly (MuJoCo's Euler with `eulerdamp` on, its
-    # default; for this model the same step as implicitfast) instead of explicitly (go2.xml's
-    # eulerdamp="disable"). At the Go2 description's damping of 2 the explicit step damps a calf
-    # (5 ms x 2 N m s/rad over ~0.016 kg m^2) 60 % per step where the implicit one damps 38 %.
+    # Joints' passive damping integrated implicitly (MuJoCo's default `eulerdamp`; here the same
+    # step as implicitfast), not explicitly (go2.xml's eulerdamp="disable"): at damping 2 the
+    # explicit step damps a calf 60 % per 5 ms step where the implicit one damps 38 %.
     implicit_damping: bool = False
-    # A collision sphere on the head (HEAD), one of the trunk spheres: it counts as a trunk
-    # contact (training's trunk-contact ending, the collision penalty). Off: the spheres of
-    # go2.xml alone, as every policy up to 2026-11-26 trained.
+    # A collision sphere on the head (HEAD), a trunk sphere (trunk-contact ending, collision
+    # penalty). Off: go2.xml's spheres alone, as every policy up to 2026-11-26 trained.
     head_collision: bool = False
-    # The robot's fixed action delay (s): each PD target takes effect this long after the policy
-    # computed it, in whole physics steps (the previous target holds until then), as sim2sim's
-    # --latency-ms does; at most one policy step. For evaluating a policy with a delay
-    # (`--env robot.action_delay_s=0.02`): evaluation turns randomisation off, and with it
-    # env.randomization.action_delay_s, which draws the delay per robot instead where set.
+    # Fixed action delay (s), whole physics steps (the previous target holds until then), as
+    # sim2sim's --latency-ms; at most one policy step. Evaluating with a delay: `--env
+    # robot.action_delay_s=0.02` (env.randomization.action_delay_s draws it per robot instead).
     action_delay_s: float = 0.0
     # s: every geom's contact solref time constant in MJX and the ground truth's box world (0:
-    # MuJoCo's 0.02, as sim2sim keeps); at 0.01 the two agree on spiral L6 (docs/deploy.md).
+    # MuJoCo's 0.02, as sim2sim keeps); the evaluation physics's 0.01 (PHYSICS).
     contact_timeconst: float = 0.0
 
     @property
@@ -135,7 +130,8 @@ PHYSICS = {
     "lean": {"terrain_contacts": "nearest", "shin_collision": False, "solver_iterations": 1,
              "ls_iterations": 3},
     "evaluation": {"terrain_contacts": "columns", "shin_collision": True, "solver_iterations": 8,
-                   "ls_iterations": 10, "sunk_exit": "nearest", "timestep": 0.005},
+                   "ls_iterations": 10, "sunk_exit": "nearest", "timestep": 0.005,
+                   "contact_timeconst": 0.01},
     "evaluation_top": {"terrain_contacts": "columns", "shin_collision": True,
                        "solver_iterations": 8, "ls_iterations": 10, "sunk_exit": "top",
                        "timestep": 0.005},
@@ -152,13 +148,17 @@ nearest-point collider);
 vertical risers (the CPU MuJoCo ground truth's geometry, `sim.contact.sphere_columns`), shin
 spheres, the solver run near convergence (8 Newton iterations, 10 line-search steps), a sphere
 centre sunk into a column pushed out through the column's nearest exposed face, a 5 ms physics
-step (an evaluation keeps the policy's control period: `study.evaluate.eval_env`). Checked against
-CPU MuJoCo on box stairs: within 3 points on 35 of the 36 cells of
-experiments/results/ground_truth/table.md, 3.8 on the last (2026-11-25);
+step (an evaluation keeps the policy's control period: `study.evaluate.eval_env`) and every
+contact's solref time constant at 0.01 s (go2.xml's is MuJoCo's 0.02). Against CPU MuJoCo on box
+stairs at the same contact: within 3 points on every cell of
+experiments/results/ground_truth/table_stiff.md (2026-11-28);
+"evaluation_soft": the same at go2.xml's 0.02 s, the evaluation physics 2026-11-25 to 11-28 (up
+to 3.8 points off on the stage-2 cells, 6-31 on the generalists' spiral ones);
 "evaluation_top": the evaluation physics as published to 2026-11-24, the sunk centre pushed out
 through the column's top (up to 8.7 points optimistic on the U-turn at 14-16 cm risers); the
 physics the committed stage2_u_paper* runs and the first generalists trained in."""
 PHYSICS["lean_implicit"] = {**PHYSICS["lean"], "solver_iterations": 4}
+PHYSICS["evaluation_soft"] = {**PHYSICS["evaluation"], "contact_timeconst": 0.0}
 
 
 def expand_physics_in(table: dict[str, Any], key: str = "robot") -> dict[str, Any]:

@@ -41,9 +41,15 @@ def eval_env(policy: Policy, atlas: Any, spec: Any) -> StairEnv:
     `spec.env_overrides` applied, in evaluation settings (no noise, no randomisation, no
     trunk-contact ending, no curriculum), episodes of `spec.episode_length_s`; `spec` is an
     EvalSpec, CellSpec or tools' PlaySpec."""
+    return StairEnv(atlas, eval_config(policy, spec))
+
+
+def eval_config(policy: Policy, spec: Any) -> EnvConfig:
+    """The env config `eval_env` builds its env from (`physics_settings` of it says what physics
+    an evaluation of `policy` under `spec` runs in, before any env is built)."""
     overrides = physics_overrides(spec)
     cfg = keep_control_period(env_config_of(policy, overrides), env_config_of(policy), overrides)
-    return StairEnv(atlas, evaluation_config(cfg, spec.episode_length_s))
+    return evaluation_config(cfg, spec.episode_length_s)
 
 
 def keep_control_period(cfg: EnvConfig, trained: EnvConfig,

@@ -120,7 +120,8 @@ def _cell(src: str, dst: str, path: str, digest: str, load: Callable[[], Any],
           spec: evaluate.EvalSpec, cells: Path | None) -> dict[str, Any]:
     """One cell of the matrix: model `src` (policy file `path`, SHA-256 `digest`, `load()` its
     policy) on family `dst`, kept from cells/ when it was evaluated there as asked, else
-    evaluated and written there."""
+    evaluated and written there. As asked includes the physics the preset resolves to today: a
+    cell judged before a preset's name was given to other settings is evaluated again."""
     want = {"family": dst, "levels": [lv + 1 for lv in spec.levels],
             "robots_per_level": spec.robots_per_level,
             "episode_length_s": spec.episode_length_s, "seed": spec.seed,
@@ -128,6 +129,9 @@ def _cell(src: str, dst: str, path: str, digest: str, load: Callable[[], Any],
             "checkpoint": str(path), "checkpoint_sha256": digest}
     cell = cells / f"{src}__on__{dst}.json" if cells is not None else None
     rec = _finished_cell(cell, want) if cell is not None else None
+    if rec is not None:  # JSON's view of the settings, as the record holds them
+        now = json.loads(json.dumps(evaluate.physics_settings(evaluate.eval_config(load(), spec))))
+        rec = rec if rec.get("physics_settings") == now else None
     if rec is not None:
         print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
         return rec

@@ -132,7 +132,7 @@ def test_transfer_matrix_and_transferability(trained, tmp_path, monkeypatch):
     cell = result["success"]["u_shaped"]["u_shaped"]
     assert cell["physics_settings"]["terrain_contacts"] == "columns"
     assert cell["physics_settings"]["sunk_exit"] == "nearest"  # the evaluation physics
-    assert cell["physics_settings"]["contact_timeconst"] == 0.0  # the MJCF's contact
+    assert cell["physics_settings"]["contact_timeconst"] == 0.01  # the evaluation physics's
     # a matrix run again over the same folder keeps its finished cells (a killed run resumes)
     def no_evaluation(*_):
         raise AssertionError("a finished cell was evaluated again")
@@ -163,6 +163,13 @@ def test_transfer_matrix_and_transferability(trained, tmp_path, monkeypatch):
     assert transfer._finished_cell(saved, {**want, "levels": [3, 4]}) is None
     with pytest.raises(AssertionError, match="evaluated again"):
         transfer.matrix({"u_shaped": path}, dataclasses.replace(spec, env_overrides=()), tmp_path)
+    # ... nor one judged when the preset's name meant other physics (the MJCF's contact)
+    soft = json.loads(saved.read_text())
+    soft["physics_settings"]["contact_timeconst"] = 0.0
+    saved.write_text(json.dumps(soft))
+    assert transfer._finished_cell(saved, want) is not None  # the other fields still match
+    with pytest.raises(AssertionError, match="evaluated again"):
+        transfer.matrix({"u_shaped": path}, spec, tmp_path)
     saved.write_text("{not json")
     assert transfer._finished_cell(saved, want) is None
     with pytest.raises(Exception, match="unknown stair family"):
