@@ -7,7 +7,8 @@ CPU MuJoCo ground truth (box stairs, default solver), from the same starting sta
       --options reference,lean,nearest_full,mjx_converged,columns,evaluation
 All take --resolution (grid, m) and --cells (indices into CELLS); gt takes --terrain
 boxes|heightfield (heightfield: CPU MuJoCo on the very heightfield MJX sees) and --timeconst
-(every geom's contact solref time constant, for the option evaluation_stiff). `first`: from the
+(every geom's contact solref time constant: by default the evaluation physics's 0.01, the option
+evaluation_stiff; 0 for go2.xml's 0.02, the option evaluation_exit). `first`: from the
 same states on the stairs (the policy's, after 2 s in the ground truth) the same actions for one
 second in the ground truth and, replayed open-loop, in each option (study.ground_truth.
 first_second): base position error and net vertical contact force, per cell and policy.
@@ -148,7 +149,7 @@ def _gt_task(args) -> str:
     path = Path(out) / f"gt_{policy_name}_{cell[0]}_{cell[1]}_{cell[2] + 1}.json"
     if path.exists():
         return f"{path.name} (kept)"
-    extra = (f"robot.contact_timeconst={timeconst}",) if timeconst else ()
+    extra = (f"robot.contact_timeconst={timeconst}",)  # 0: go2.xml's (the preset's is 0.01)
     spec = CellSpec(cells=(cell,), robots_per_cell=robots, resolution=res, seed=seed,
                     env_overrides=OPTIONS["reference"] + extra)
     rec = success_in_ground_truth(load_policy(KNOWN_POLICIES[policy_name]), spec,
@@ -162,8 +163,9 @@ def run_gt(out: Path, robots: int, workers: int, cells: list, res: float, terrai
            seed: int = 0, policies: tuple[str, ...] = tuple(POLICIES),
            timeconst: float = 0.0) -> None:
     """Each policy on each cell in CPU MuJoCo, one task per process; fewer tasks than workers:
-    the spare workers become MuJoCo threads of each task. `timeconst` > 0: every geom's contact
-    solref time constant (robot.contact_timeconst), as MJX's option evaluation_stiff."""
+    the spare workers become MuJoCo threads of each task. `timeconst`: every geom's contact
+    solref time constant (robot.contact_timeconst; 0: go2.xml's 0.02, MJX's evaluation_exit;
+    0.01: the evaluation physics's, MJX's evaluation_stiff)."""
     n = len(cells) * len(policies)
     nthread = max(1, workers // max(1, n))
     tasks = [(p, c, robots, str(out), res, terrain, seed, nthread, timeconst) for c in cells
@@ -212,8 +214,9 @@ def main() -> None:
     ap.add_argument("--policies", default=",".join(POLICIES), help="for first and gt")
     ap.add_argument("--seed", type=int, default=0, help="for gt: the robots' starts (as eval's)")
     ap.add_argument("--terrain", default="boxes", choices=("boxes", "heightfield"))
-    ap.add_argument("--timeconst", type=float, default=0.0,
-                    help="for gt: every geom's contact solref time constant (0: go2.xml's 0.02)")
+    ap.add_argument("--timeconst", type=float, default=None,
+                    help="for gt: every geom's contact solref time constant (default: the "
+                         "evaluation physics's, 0.01; 0: go2.xml's 0.02, evaluation_exit's)")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     cells = [CELLS[int(i)] for i in a.cells.split(",")] if a.cells else CELLS
@@ -224,6 +227,10 @@ def main() -> None:
         run_mjx(a.out, a.robots or 1000, a.options.split(","), cells, a.resolution)
     else:
         os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
+        if a.timeconst is None:
+            from mjx_stairs.sim.robot import PHYSICS
+
+            a.timeconst = PHYSICS["evaluation"]["contact_timeconst"]
         run_gt(a.out, a.robots or 200, a.workers, cells, a.resolution, a.terrain, a.seed,
                a.policies.split(","), a.timeconst)
 

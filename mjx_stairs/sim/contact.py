@@ -166,22 +166,7 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top",
     (issue 19, docs/results.md section 5b).
     """
     r = s.size[0]
-    p = h.mat.T @ (s.pos - h.pos)
-    ncol, nrow = h.ncol, h.nrow
-    dx = 2.0 * h.size[0] / (ncol - 1)
-    dy = 2.0 * h.size[1] / (nrow - 1)
-    # Grid points whose cells reach [p - r, p + r]: at most ceil(2r / dx) + 1 per axis, the
-    # sub-grid MJX sizes from the bounding radius.
-    c0 = jnp.floor((p[0] - r + h.size[0]) / dx + 0.5).astype(jnp.int32)
-    r0 = jnp.floor((p[1] - r + h.size[1]) / dy + 0.5).astype(jnp.int32)
-    ci = jnp.clip(c0 + jnp.arange(subgrid_size[0]), 0, ncol - 1)
-    ri = jnp.clip(r0 + jnp.arange(subgrid_size[1]), 0, nrow - 1)
-    ci, ri = jnp.meshgrid(ci, ri, indexing="ij")
-    ci, ri = ci.ravel(), ri.ravel()
-    top = h.data[ci, ri] * h.size[2]
-    lo = jnp.stack([(ci - 0.5) * dx - h.size[0], (ri - 0.5) * dy - h.size[1],
-                    jnp.full_like(top, -h.size[3])], -1)
-    hi = jnp.stack([(ci + 0.5) * dx - h.size[0], (ri + 0.5) * dy - h.size[1], top], -1)
+    corner, p, ci, ri, top, lo, hi = _columns_near(h, s.pos, r, subgrid_size)
     q = jnp.clip(p, lo, hi)  # [C, 3] nearest point of each column
     d = jnp.linalg.norm(q - p, axis=-1)
     inside = d <= 0.0
@@ -204,9 +189,34 @@ def sphere_columns(h, s, subgrid_size: tuple[int, int], sunk_exit: str = "top",
     found = [(dist1, pos1, n1)] + _further_contacts(q, d, q1, n1, contact, ~sunk, FRONT * r,
                                                     ncon - 1)
     dist = jnp.stack([c[0] for c in found])
-    pos = jnp.stack([c[1] for c in found]) @ h.mat.T + h.pos
+    pos = jnp.stack([c[1] for c in found]) @ h.mat.T + corner
     n = jnp.stack([c[2] for c in found]) @ h.mat.T
     return dist, pos, jax.vmap(mjx_math.make_frame)(n)
+
+
+def _columns_near(h, centre, r, subgrid_size: tuple[int, int]):
+    """(corner, p, ci, ri, top, lo, hi) for `sphere_columns`: the world position of grid point
+    (0, 0), the sphere centre in its frame, and the columns whose cells reach [p - r, p + r] (at
+    most ceil(2r / dx) + 1 per axis, the sub-grid MJX sizes from the bounding radius): grid
+    indices, tops and box corners [C, 3]. From grid point (0, 0), the atlas corner (the world
+    origin for our atlases), not the field's centre: a point of a tile has the same float32
+    coordinates in every atlas that holds the tile (from the centre, 1 ulp at 10 m is 1e-6 m,
+    which the stiff contact turned into 1e-5 m/s between atlases: issue 19)."""
+    corner = h.pos - h.mat @ jnp.array([h.size[0], h.size[1], 0.0])
+    p = h.mat.T @ (centre - corner)
+    ncol, nrow = h.ncol, h.nrow
+    dx = 2.0 * h.size[0] / (ncol - 1)
+    dy = 2.0 * h.size[1] / (nrow - 1)
+    c0 = jnp.floor((p[0] - r) / dx + 0.5).astype(jnp.int32)
+    r0 = jnp.floor((p[1] - r) / dy + 0.5).astype(jnp.int32)
+    ci = jnp.clip(c0 + jnp.arange(subgrid_size[0]), 0, ncol - 1)
+    ri = jnp.clip(r0 + jnp.arange(subgrid_size[1]), 0, nrow - 1)
+    ci, ri = jnp.meshgrid(ci, ri, indexing="ij")
+    ci, ri = ci.ravel(), ri.ravel()
+    top = h.data[ci, ri] * h.size[2]
+    lo = jnp.stack([(ci - 0.5) * dx, (ri - 0.5) * dy, jnp.full_like(top, -h.size[3])], -1)
+    hi = jnp.stack([(ci + 0.5) * dx, (ri + 0.5) * dy, top], -1)
+    return corner, p, ci, ri, top, lo, hi
 
 
 def _further_contacts(q, d, q1, n1, contact, active, front: float, count: int) -> list:

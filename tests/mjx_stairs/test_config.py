@@ -150,7 +150,9 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
              "stage2_u_robot_corner.toml": "evaluation",
              "stage2_u_robot_history.toml": "evaluation", "generalist_history.toml": "evaluation",
              "stage2_u_robot_latency20.toml": "evaluation",
-             "generalist_lean.toml": "lean_implicit"}
+             "generalist_lean.toml": "lean_implicit",
+             # resumes a state trained at go2.xml's contact: the std its one change
+             "generalist_d2_stop_chord_landing_rstd.toml": "evaluation_soft"}
     want = PHYSICS[named.get(path.name, "lean" if path.name.endswith("_lean.toml")
                              else "evaluation_top" if paper
                              else "evaluation" if path.name.startswith("generalist_")  # variants

@@ -72,13 +72,17 @@ def _env(cells):
 
 def test_a_step_on_a_tile_does_not_depend_on_the_rest_of_the_atlas():
     """The evaluation physics (columns collider, shin spheres, 8 Newton iterations, 10
-    line-search steps): one step from the same states and actions on a tile alone and in a
-    wider atlas whose other tiles are taller (so the heightfield's span, extent and centre all
-    differ) gives the same next state and observation to 1e-5 (measured: 2.9e-6 m/s). The columns
-    collider reads heights in the world frame. MJX's own collider (the reference physics)
-    computes a contact in the heightfield's frame (centred on the atlas, heights scaled by its
-    span), so there float32 rounding differs between the atlases and one Newton iteration passes
-    it on: velocities agree to 1e-4 only (measured 5.7e-5 m/s, relative 2e-4)."""
+    line-search steps, the stiff 0.01 s contact): one step from the same states and actions on a
+    tile alone and in a wider atlas whose other tiles are taller (so the heightfield's span,
+    extent and centre all differ) gives the same next state and observation to 1e-5 (measured:
+    the same state bit for bit, observations 2.4e-7 apart; also under the speed XLA flags). The
+    columns collider works from the atlas corner, so a tile's points have the same float32
+    coordinates in both; from the atlas centre (to
+    2026-11-28) they were 1 ulp apart at 10 m, which the stiff contact turned into 1.1e-5 m/s.
+    MJX's own collider (the reference physics) computes a contact in the heightfield's frame
+    (centred on the atlas, heights scaled by its span), so there float32 rounding differs between
+    the atlases and one Newton iteration passes it on: velocities agree to 1e-4 only (measured
+    5.7e-5 m/s, relative 2e-4)."""
     cell = ("u_shaped", "test", 3)
     alone = _env([cell])
     wide = _env([cell, ("straight", "extended", 5), ("spiral", "extended", 5)])
