@@ -35,9 +35,10 @@ class EvalSpec:
     tile_size: float = field(default=10.0, metadata={"help": "tile side (m)"})
     physics: str = field(
         default=EVAL_PHYSICS,
-        metadata={"help": "physics preset to evaluate in: evaluation (default), evaluation_top "
-                  "(as published to 2026-11-24), reference, lean, lean_implicit, or trained (the "
-                  "policy's own)"})
+        metadata={"help": "physics preset to evaluate in: evaluation (default; contact solref "
+                  "0.01 s), evaluation_soft (the same at go2.xml's 0.02 s, as published "
+                  "2026-11-25 to 11-28), evaluation_top (as published to 2026-11-24), reference, "
+                  "lean, lean_implicit, or trained (the policy's own)"})
     env_overrides: tuple[str, ...] = field(
         default=(),
         metadata={"flag": "--env", "metavar": "KEY=VALUE",
