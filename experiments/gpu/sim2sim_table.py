@@ -118,7 +118,7 @@ def family_starts(policy_path: Path, spec) -> dict[str, list[tuple[str, np.ndarr
 def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
     """Every chunk of every cell not written yet."""
     opts = dict(episode_s=args.episode_s, latency_ms=args.latency_ms, noise=args.noise,
-                push=args.push, seed=args.seed)
+                push=args.push, seed=args.seed, contact_timeconst=args.contact_timeconst)
     out = []
 
     def chunks(cell, spec, poses):
@@ -194,7 +194,7 @@ def write_cell(out: Path, cell: str, records: list[dict], args) -> None:
     result = {"cell": cell, **s2s.summarise(records), "policy": str(args.policy),
               "robot": args.robot or "go2_full.xml (ours)",
               "direction": cell_direction(cell, args.direction),
-              "latency_ms": args.latency_ms,
+              "latency_ms": args.latency_ms, "contact_timeconst": args.contact_timeconst,
               "noise": args.noise, "push": args.push, "episode_s": args.episode_s,
               "seed": args.seed, "resolution": args.resolution, "records": records}
     atomic.write_text(out / "cells" / f"{cell}.json", json.dumps(result, indent=1) + "\n")
@@ -245,6 +245,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--latency-ms", type=float, default=0.0)
     p.add_argument("--noise", action="store_true")
     p.add_argument("--push", action="store_true")
+    p.add_argument("--contact-timeconst", type=float, default=0.0, help="every geom's contact "
+                   "solref time constant in MuJoCo (0: the MJCF's 0.02 s; 0.01: today's MJX "
+                   "evaluation physics, whose --mjx columns these are)")
     p.add_argument("--robot", default=None, help="a Go2 MJCF (default: ours, full geometry)")
     p.add_argument("--mjx", action="store_true", help="run the MJX evaluation of the same "
                    "starts first (family cells; a GPU host)")
