@@ -29,6 +29,7 @@ def out(tmp_path_factory):
 def test_the_down_cell_starts_where_eval_starts_its_robots(out):
     cell = json.loads((out / "cells" / "straight_test_down_L2.json").read_text())
     assert cell["direction"] == "down" and cell["episodes"] == 4
+    assert cell["contact_timeconst"] == 0.0  # the MJCF's, recorded (--contact-timeconst)
     args = table.main.__globals__["argparse"].Namespace(
         direction="down", levels=[1], episodes=4, seed=0, resolution=0.025)
     groups = table.family_starts(POLICY, table.eval_spec(args, "straight"))
@@ -78,9 +79,11 @@ def test_cases_picks_code_cases_and_an_unknown_one_is_refused(tmp_path):
     onnx = ROOT / "experiments/results/generalist_d2/policy.onnx"
     args = table.main.__globals__["argparse"].Namespace(
         episode_s=1.0, latency_ms=0.0, noise=False, push=False, seed=0, chunk=2, episodes=3,
-        cells=["code"], cases=["code_commercial_straight_down"], resolution=0.025, robot=None)
+        cells=["code"], cases=["code_commercial_straight_down"], resolution=0.025, robot=None,
+        contact_timeconst=0.01)
     tasks = table.tasks_for(args, onnx, set())
     assert {t[0] for t in tasks} == {"code_commercial_straight_down"}
+    assert {t[3]["contact_timeconst"] for t in tasks} == {0.01}  # each episode's MuJoCo contact
     assert sum(len(t[2]) for t in tasks) == 3  # the episodes, in chunks of 2
     assert table.tasks_for(args, onnx, {"code_commercial_straight_down"}) == []
     with pytest.raises(SystemExit, match="--cases: no case 'code_nowhere'"):
