@@ -495,9 +495,11 @@ run_step() {
     # fidelity-x64 and fidelity with FIDELITY_OPTIONS=columns_converged
     # FIDELITY_CELLS=8,9,15,16,17); CPU_WORKERS (14 of 16 cores)
     ground-truth)
+      # gt1000/ was published at go2.xml's contact (0.02 s): --timeconst 0 reproduces it
+      # (GT_TIMECONST=0.01: today's evaluation physics, gt_supported_stiff1000/'s contact)
       background ground_truth/gt1000 python3 experiments/gpu/fidelity.py gt \
         "$BG/ground_truth/gt1000" --robots 1000 --workers "${CPU_WORKERS:-14}" \
-        --cells "${GT_CELLS:-}" ;;
+        --cells "${GT_CELLS:-}" --timeconst "${GT_TIMECONST:-0}" ;;
     # section 5b's speed: physics-only env steps/s of the reference and lean physics, each with its
     # own collider and with the columns collider, 4096 robots (stage2_u_lean.toml), 3 repeats,
     # into $OUT/ground_truth/bench_colliders/
