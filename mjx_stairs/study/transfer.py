@@ -128,10 +128,10 @@ def _cell(src: str, dst: str, path: str, digest: str, load: Callable[[], Any],
             "eval_physics": spec.physics, "env_overrides": list(spec.env_overrides),
             "checkpoint": str(path), "checkpoint_sha256": digest}
     cell = cells / f"{src}__on__{dst}.json" if cells is not None else None
+    if cell is not None:  # the settings as JSON holds them, as the record does
+        want["physics_settings"] = json.loads(json.dumps(
+            evaluate.physics_settings(evaluate.eval_config(load(), spec))))
     rec = _finished_cell(cell, want) if cell is not None else None
-    if rec is not None:  # JSON's view of the settings, as the record holds them
-        now = json.loads(json.dumps(evaluate.physics_settings(evaluate.eval_config(load(), spec))))
-        rec = rec if rec.get("physics_settings") == now else None
     if rec is not None:
         print(f"[transfer] {src} on {dst}: kept {cell}", flush=True)
         return rec
