@@ -110,6 +110,11 @@ _PYRAMID_TRAIN = _table([
     (0.067, 0.30, 0.0, 0), (0.083, 0.30, 0.0, 0), (0.100, 0.30, 0.0, 0), (0.117, 0.30, 0.0, 0),
     (0.133, 0.30, 0.0, 0), (0.150, 0.30, 0.0, 0),
 ])
+# Stage 1 widened to the building codes' risers (issue 24's option): the pyramid's rings from flat
+# to 21 cm risers, treads from 0.30 to 0.25 m, linear over the 10 levels (the commercial limit,
+# 17.8 / 27.9 cm, lies between levels 8 and 9; the residential 19.7 / 25.4 cm at level 10)
+_PYRAMID_TALL_TRAIN = _table([
+    (round(0.21 * i / 9, 3), round(0.30 - 0.05 * i / 9, 3), 0.0, 0) for i in range(10)])
 _STRAIGHT_TRAIN = _table([
     (0.040, 0.30, 3.00, 10), (0.051, 0.30, 2.83, 10), (0.062, 0.30, 2.67, 10),
     (0.073, 0.30, 2.50, 10), (0.084, 0.30, 2.33, 10), (0.096, 0.30, 2.17, 10),
@@ -178,6 +183,8 @@ LEVELS: dict[str, dict[str, tuple]] = {
     "u_shaped": {"train": _U_SHAPED_TRAIN, "test": _U_SHAPED_TEST, "extended": _U_SHAPED_EXT},
     "spiral": {"train": _SPIRAL_TRAIN, "test": _SPIRAL_TEST, "extended": _SPIRAL_EXT},
     "building": {"train": _BUILDING_TRAIN, "test": _BUILDING_TRAIN, "extended": _BUILDING_EXT},
+    "pyramid_tall": {"train": _PYRAMID_TALL_TRAIN, "test": _PYRAMID_TALL_TRAIN,
+                     "extended": _PYRAMID_EXT},
 }
 PAPER_FAMILIES = ("pyramid", "straight", "l_shaped", "u_shaped", "spiral")
 

@@ -24,6 +24,7 @@ FAMILIES: dict[str, ModuleType] = {
     "u_shaped": u_shaped,
     "spiral": spiral,
     "building": building,
+    "pyramid_tall": pyramid,    # the pyramid to 21 cm risers (levels.py); tiles say "pyramid_tall"
 }
 assert tuple(FAMILIES)[:len(PAPER_FAMILIES)] == PAPER_FAMILIES
 
@@ -67,5 +68,7 @@ def make_tile(family: str, level: int, variant: str | None = None, schedule: str
     else:
         lay, how = mod.layout(lv, variant)
         tile = build_tile(lay, how, family, level, variant, resolution, tile_size)
+    if tile.family != family:   # a family that reuses another's module (pyramid_tall)
+        tile = replace(tile, family=family)
     tile.spec["schedule"] = schedule
     return tile.with_direction(direction)

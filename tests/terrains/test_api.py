@@ -36,6 +36,26 @@ def test_schedules_have_the_protocol_figures():
         assert np.all(np.diff([lv.riser for lv in terrains.levels(fam, "train")]) > 0)
 
 
+def test_the_tall_pyramid_rises_to_the_residential_riser_with_the_pyramid_s_rings():
+    tall, low = terrains.levels("pyramid_tall", "train"), terrains.levels("pyramid", "train")
+    assert len(tall) == 10 and tall[0].riser == 0.0 and tall[-1].riser == 0.21
+    assert (tall[0].tread, tall[-1].tread) == (0.30, 0.25)
+    assert np.all(np.diff([lv.riser for lv in tall]) > 0)
+    assert np.all(np.diff([lv.tread for lv in tall]) < 0)
+    assert tall[-1].riser > 0.197 > low[-1].riser   # the residential code riser, 19.7 cm
+    top = terrains.make_tile("pyramid_tall", 9, "+y", resolution=0.05)
+    base = terrains.make_tile("pyramid", 9, "+y", resolution=0.05)
+    assert top.family == "pyramid_tall" and base.family == "pyramid"
+    # the same generator: rings of 21 cm over 25 cm treads, goal on the high border
+    assert top.spec["riser"] == 0.21 and top.spec["steps"] == 9
+    assert top.goal_height == pytest.approx(9 * 0.21, abs=1e-3)
+    assert np.unique(np.round(top.heights, 3)).size == 10   # the platform and nine rings
+    down = terrains.make_tile("pyramid_tall", 9, "+y", resolution=0.05, direction="down")
+    assert down.family == "pyramid_tall" and down.direction == "down"
+    np.testing.assert_array_equal(down.heights, top.heights)
+    assert "pyramid_tall" in terrains.FAMILIES
+
+
 @pytest.mark.parametrize("fam", list(terrains.PAPER_FAMILIES))
 def test_extended_levels_build(fam):
     for i in range(len(terrains.levels(fam, "extended"))):
