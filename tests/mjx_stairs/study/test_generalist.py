@@ -37,6 +37,37 @@ def test_the_gpu_config_is_the_generalist():
     assert len(env.curriculum.family_weights) == len(FAMILIES)
 
 
+def _flat(table, prefix: str = "") -> dict:
+    """A config (or its dict) as {dotted key: value}; terrain.variants stays one value."""
+    table = dataclasses.asdict(table) if dataclasses.is_dataclass(table) else table
+    out = {}
+    for k, v in table.items():
+        if isinstance(v, dict) and k != "variants":
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def test_the_tall_start_and_today_s_control_differ_from_the_generalist_in_their_start_alone():
+    base = _flat(experiment.load(TOML, cpu=False)[0])
+    own = {"publish_dir", "train.experiment"}
+    for name, init in (("generalist_tall", "experiments/results/stage1_tall/policy.npz"),
+                       ("generalist_from_stage1", "experiments/results/stage1/policy.npz")):
+        other = _flat(experiment.load(f"experiments/{name}.toml", cpu=False)[0])
+        changed = {k for k in base if base[k] != other[k]}
+        assert changed <= own | {"init_from"}, (name, changed)
+        assert other["init_from"] == init and other["train.experiment"] == name
+    stage1 = _flat(experiment.load("experiments/stage1.toml", cpu=False)[0])
+    tall = experiment.load("experiments/stage1_tall.toml", cpu=False)[0]
+    assert tall.terrain.families == ("pyramid_tall",)
+    assert tall.init_from == "experiments/results/stage1/policy.npz"
+    assert (tall.env.robot.terrain_contacts, tall.env.robot.contact_timeconst) == ("columns", 0.01)
+    changed = {k for k, v in _flat(tall).items() if stage1[k] != v}
+    assert {k for k in changed if not k.startswith("env.robot.")} <= own | {
+        "init_from", "terrain.families", "train.total_iterations"}   # and the physics preset
+
+
 @pytest.fixture(scope="module")
 def atlas():
     config, cpu = experiment.load(TOML, cpu=True)
