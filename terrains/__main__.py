@@ -31,7 +31,8 @@ def _xy(text: str) -> tuple[float, float]:
 
 
 def _tile_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("family", help="pyramid, straight, l_shaped, u_shaped, spiral, building or pyramid_tall")
+    p.add_argument("family",
+                   help="pyramid, straight, l_shaped, u_shaped, spiral, building or pyramid_tall")
     p.add_argument("--level", type=int, required=True, help="1-based level")
     p.add_argument("--variant", default=None,
                    help="e.g. left/right, cw/ccw, +x, u_left, spiral_cw (default: first)")

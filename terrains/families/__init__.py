@@ -63,12 +63,10 @@ def make_tile(family: str, level: int, variant: str | None = None, schedule: str
     level = int(level)
     if getattr(mod, "SEEDED", False):
         tile = mod.make(lv, level, variant, resolution, tile_size, seed=seed, schedule=schedule)
-    elif hasattr(mod, "make"):
-        tile = mod.make(lv, level, variant, resolution, tile_size)
+    elif hasattr(mod, "make"):   # the pyramid, also under the name pyramid_tall
+        tile = mod.make(lv, level, variant, resolution, tile_size, family=family)
     else:
         lay, how = mod.layout(lv, variant)
         tile = build_tile(lay, how, family, level, variant, resolution, tile_size)
-    if tile.family != family:   # a family that reuses another's module (pyramid_tall)
-        tile = replace(tile, family=family)
     tile.spec["schedule"] = schedule
     return tile.with_direction(direction)

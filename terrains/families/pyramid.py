@@ -21,8 +21,10 @@ MIN_BORDER = 1.5
 _DIRS = {"+x": (1.0, 0.0), "-x": (-1.0, 0.0), "+y": (0.0, 1.0), "-y": (0.0, -1.0)}
 
 
-def make(lv: Level, level: int, variant: str, resolution: float, tile_size: float) -> Tile:
-    """[n, n] tile, n = tile_size / resolution; platform at height 0 centred at tile_size / 2."""
+def make(lv: Level, level: int, variant: str, resolution: float, tile_size: float,
+         family: str = "pyramid") -> Tile:
+    """[n, n] tile, n = tile_size / resolution; platform at height 0 centred at tile_size / 2.
+    ``family``: the name the tile carries (``pyramid_tall`` reuses this generator)."""
     n = check_grid(resolution, tile_size)
     half, t, r = tile_size / 2, lv.tread, lv.riser
     steps = int(np.floor((half - PLATFORM / 2 - MIN_BORDER) / t + 1e-9)) + 1
@@ -52,5 +54,5 @@ def make(lv: Level, level: int, variant: str, resolution: float, tile_size: floa
     return Tile(heights=heights, resolution=resolution, spawn=spawn,
                 goal=np.array([gx, gy, top, yaw], np.float32),
                 centreline=np.concatenate([xy, z[:, None]], 1), floor_height=0.0,
-                goal_height=float(quantise(top)), family="pyramid", level=level,
+                goal_height=float(quantise(top)), family=family, level=level,
                 variant=variant, walls=np.zeros_like(heights, bool), spec=spec)

@@ -37,16 +37,9 @@ def test_the_gpu_config_is_the_generalist():
     assert len(env.curriculum.family_weights) == len(FAMILIES)
 
 
-def _flat(table, prefix: str = "") -> dict:
-    """A config (or its dict) as {dotted key: value}; terrain.variants stays one value."""
-    table = dataclasses.asdict(table) if dataclasses.is_dataclass(table) else table
-    out = {}
-    for k, v in table.items():
-        if isinstance(v, dict) and k != "variants":
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
+def _flat(config) -> dict:
+    """A config as {dotted key: value}, as experiment files and overrides name them."""
+    return dict(experiment._flatten(dataclasses.asdict(config)))
 
 
 def test_the_tall_start_and_today_s_control_differ_from_the_generalist_in_their_start_alone():
