@@ -151,6 +151,7 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
              "stage2_u_robot_history.toml": "evaluation", "generalist_history.toml": "evaluation",
              "stage2_u_robot_latency20.toml": "evaluation",
              "stage2_u_robot_stiff.toml": "evaluation", "stage1_tall.toml": "evaluation",
+             "stage2_u_robot_stiff_s1.toml": "evaluation",
              "generalist_lean.toml": "lean_implicit",
              # resumes a state trained at go2.xml's contact: the std its one change
              "generalist_d2_stop_chord_landing_rstd.toml": "evaluation_soft"}
