@@ -117,7 +117,7 @@ def check_cell(family: str, cell: str) -> None:
 
 
 def _job(args) -> str:
-    onnx, family, cell, robot, out, episodes, latency, episode_s = args
+    onnx, family, cell, robot, out, episodes, latency, episode_s, timeconst = args
     from mjx_stairs.tools import sim2sim
 
     if family == "code":
@@ -126,7 +126,8 @@ def _job(args) -> str:
         direction, level = parse_cell(cell)
         course = sim2sim.family_course(family, level, "test", direction)
     r = sim2sim.run(onnx, course, sim2sim.Options(episodes=episodes, latency_ms=latency,
-                                                  episode_s=episode_s),
+                                                  episode_s=episode_s,
+                                                  contact_timeconst=timeconst),
                     robot=robot, out=out)
     return f"{out}: {100 * r['success']:.1f} % success, {100 * r['fell']:.1f} % falls, " \
            f"{r['wall_s']:.0f} s"
@@ -170,6 +171,9 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--latency-ms", type=float, default=0.0)
     ap.add_argument("--episode-s", type=float, default=20.0, help="30 as the code suite's")
+    ap.add_argument("--contact-timeconst", type=float, default=0.0,
+                    help="every geom's contact solref time constant (s; 0: the MJCF's, 0.02), "
+                         "0.01 as the evaluation physics since 2026-11-28")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     a = ap.parse_args()
     variants, cells = a.variants.split(","), a.cells.split(",")
@@ -186,14 +190,15 @@ def main() -> None:
             out = a.out / v / f"{c}.json"
             if not out.is_file():
                 jobs.append((a.onnx, a.family, c, str(robot), str(out), a.episodes, a.latency_ms,
-                             a.episode_s))
+                             a.episode_s, a.contact_timeconst))
     with ProcessPoolExecutor(a.workers) as pool:
         for line in pool.map(_job, jobs):
             print(line, flush=True)
     text = table(a.out, variants, cells)
     where = "the code suite" if a.family == "code" else f"{a.family} test levels"
     note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell ({a.episode_s:g} s), "
-            f"{where}, sim2sim's starts (seed 0), latency {a.latency_ms:g} ms; +gained/-lost: "
+            f"{where}, sim2sim's starts (seed 0), latency {a.latency_ms:g} ms, contact time "
+            f"constant {a.contact_timeconst or 0.02:g} s; +gained/-lost: "
             "starts that succeed with the variant and not with `full`, and the reverse; trunk, "
             f"calf: step-edge touches per episode. Policy: {a.onnx}.\n")
     (a.out / "table.md").write_text(text + note)
