@@ -172,7 +172,7 @@ def main() -> None:
     ap.add_argument("--latency-ms", type=float, default=0.0)
     ap.add_argument("--episode-s", type=float, default=20.0, help="30 as the code suite's")
     ap.add_argument("--contact-timeconst", type=float, default=0.0,
-                    help="every geom's contact solref time constant (s; 0: the MJCF's, 0.02), "
+                    help="every geom's contact solref time constant (s; 0: the MJCF's own), "
                          "0.01 as the evaluation physics since 2026-11-28")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     a = ap.parse_args()
@@ -196,9 +196,10 @@ def main() -> None:
             print(line, flush=True)
     text = table(a.out, variants, cells)
     where = "the code suite" if a.family == "code" else f"{a.family} test levels"
+    contact = f"{a.contact_timeconst:g} s" if a.contact_timeconst else "the MJCF's"
     note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell ({a.episode_s:g} s), "
             f"{where}, sim2sim's starts (seed 0), latency {a.latency_ms:g} ms, contact time "
-            f"constant {a.contact_timeconst or 0.02:g} s; +gained/-lost: "
+            f"constant {contact}; +gained/-lost: "
             "starts that succeed with the variant and not with `full`, and the reverse; trunk, "
             f"calf: step-edge touches per episode. Policy: {a.onnx}.\n")
     (a.out / "table.md").write_text(text + note)
