@@ -28,7 +28,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_stairs.sim.robot import ASSET, JOINT_NAMES
+from mjx_stairs.sim.geoms import add_calf_chains
+from mjx_stairs.sim.robot import ASSET, JOINT_NAMES, LEGS
 
 ASSETS = ASSET.parent
 
@@ -72,6 +73,10 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "spheres": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
                                       _integrator(s, "implicitfast"), _default_solver(s)),
                 "training's collision spheres, everything else as `full`"),
+    "calf_chain": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
+                                         _integrator(s, "implicitfast"), _default_solver(s),
+                                         add_calf_chains(s, LEGS)),
+                   "`spheres` with the calf chains of robot.calf_collision (sim.geoms)"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "

@@ -35,7 +35,7 @@ class Quantities(NamedTuple):
     joint_vel_limit: jnp.ndarray  # [] soft velocity limit
     trunk_contacts: jnp.ndarray  # [4] bool, trunk-corner spheres touching the terrain (+ head: [5])
     knee_contacts: jnp.ndarray  # [4] bool, knee (thigh end) spheres
-    shin_contacts: jnp.ndarray  # [4] bool, mid-shin (calf) spheres
+    shin_contacts: jnp.ndarray  # [4] bool, each calf (its mid-shin sphere or calf chain)
     first_contact: jnp.ndarray  # [4] bool, a foot touched down this step
     air_time: jnp.ndarray  # [4] seconds the foot was in the air before touching down
 
@@ -60,7 +60,7 @@ class RewardConfig:
     joint_vel: float = -5e-5  # sum qdot^2
     joint_acc: float = -2e-8  # sum qddot^2
     contact_trunk_thigh: float = -8.0  # number of trunk and knee spheres touching
-    contact_calf: float = -0.2  # number of mid-shin spheres touching
+    contact_calf: float = -0.2  # number of calves touching (mid-shin sphere or calf chain)
     overspeed: float = -1.0  # planar speed above max_speed (m/s)
     backward: float = -0.05  # backward body-frame speed (m/s)
     feet_air_time: float = 0.2  # sum over touchdowns of (min(air, air_max) - air_min)

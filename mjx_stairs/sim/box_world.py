@@ -47,9 +47,10 @@ def build_model(
     """The Go2 standing among `boxes` [M, 6] (cx, cy, cz, hx, hy, hz), PD as actuators.
 
     Collision spheres are spheres whatever `config.terrain_contacts` says; mid-shin spheres
-    collide when `config.shin_collision`. Gains are `config.kp` / `config.kd`, limits the
-    reference torque limits times `config.torque_scale`, the joints' passive damping
-    `config.joint_damping` (None: the MJCF's). `heightfield` = (heights, resolution)
+    collide when `config.shin_collision`, the head and the calf chains are there when
+    `config.head_collision` and `config.calf_collision` say so. Gains are `config.kp` /
+    `config.kd`, limits the reference torque limits times `config.torque_scale`, the joints'
+    passive damping `config.joint_damping` (None: the MJCF's). `heightfield` = (heights, resolution)
     stands the robot on that heightfield instead (MuJoCo's own heightfield collider, the
     terrain shape MJX sees: for telling the terrain's shape from MJX's solver and collider).
     """
@@ -79,6 +80,8 @@ def build_model(
     rb.set_joint_damping(spec, config)
     if config.head_collision:
         rb.add_head(spec)
+    if config.calf_collision:
+        rb.add_calf_chains(spec, rb.LEGS)
     solref.set_timeconst(spec, config.contact_timeconst)
     if not config.shin_collision:
         for name in rb.SPHERE_GROUPS["shin"]:

@@ -23,6 +23,7 @@ from mujoco.mjx._src import collision_driver
 
 from mjx_stairs.config import ConfigError
 from mjx_stairs.sim import contact, solref  # contact registers the 'nearest', 'columns' colliders
+from mjx_stairs.sim.geoms import HEAD, add_calf_chains, add_head, calf_chain_names
 
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
 
@@ -61,11 +62,6 @@ SPHERE_GROUPS = {
 }
 """Collision sphere groups by geom name suffix."""
 
-HEAD = ("trunk_head", (0.293, 0.0, -0.06), 0.047)
-"""(name, position in the base frame, radius) of the head sphere that `RobotConfig.head_collision`
-adds to the trunk group: the lower head sphere of assets/go2_full.xml, 12 cm ahead of the trunk
-corners; in sim2sim the head touches step edges up to 12 times per episode up 14 cm risers."""
-
 
 @dataclasses.dataclass(frozen=True)
 class RobotConfig:
@@ -98,6 +94,10 @@ class RobotConfig:
     # A collision sphere on the head (HEAD), a trunk sphere (trunk-contact ending, collision
     # penalty). Off: go2.xml's spheres alone, as every policy up to 2026-11-26 trained.
     head_collision: bool = False
+    # Four spheres more along each calf (geoms.CALF_CHAIN: the bare stretches between the knee,
+    # mid-shin and foot spheres, at the full robot's calf radius), counted as calf contacts. Off:
+    # go2.xml's spheres alone, as every policy up to 2026-11-29 trained.
+    calf_collision: bool = False
     # Fixed action delay (s), whole physics steps (the previous target holds until then), as
     # sim2sim's --latency-ms; at most one policy step. Evaluating with a delay: `--env
     # robot.action_delay_s=0.02` (env.randomization.action_delay_s draws it per robot instead).
@@ -185,6 +185,7 @@ class RobotIds:
     knee_geoms: np.ndarray  # [4]
     shin_geoms: np.ndarray  # [4]
     trunk_geoms: np.ndarray  # [4] corners (+ the head with head_collision: [5])
+    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 4 with calf_collision, else 0)
     qpos_joints: np.ndarray  # [12] qpos addresses of the joints, in JOINT_NAMES order
     qvel_joints: np.ndarray  # [12] qvel addresses of the joints
 
@@ -233,6 +234,8 @@ def build_mj_model(
     set_joint_damping(spec, config)
     if config.head_collision:
         add_head(spec)
+    if config.calf_collision:
+        add_calf_chains(spec, LEGS)
     solref.set_timeconst(spec, config.contact_timeconst)
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
@@ -252,17 +255,6 @@ def build_mj_model(
             f"{config.terrain_contacts!r}"
         )
     return spec.compile()
-
-
-def add_head(spec: mujoco.MjSpec) -> None:
-    """The head sphere (HEAD) on the base, colliding as the trunk-corner spheres do."""
-    like = spec.geom(SPHERE_GROUPS["trunk"][0])
-    name, pos, radius = HEAD
-    head = spec.body("base").add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                                      size=[radius, 0.0, 0.0], pos=list(pos))
-    for attr in ("contype", "conaffinity", "condim", "friction", "solref", "solimp", "solmix",
-                 "margin", "gap", "priority", "group"):
-        setattr(head, attr, getattr(like, attr))
 
 
 def set_joint_damping(spec: mujoco.MjSpec, config: RobotConfig) -> None:
@@ -319,6 +311,10 @@ def robot_ids(model: mujoco.MjModel) -> RobotIds:
         knee_geoms=geoms("knee"),
         shin_geoms=geoms("shin"),
         trunk_geoms=geoms("trunk"),
+        calf_geoms=np.array([[model.geom(n).id for n in calf_chain_names(leg)]
+                             if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM,
+                                                  calf_chain_names(leg)[0]) >= 0 else []
+                             for leg in LEGS], np.int32).reshape(4, -1),
         qpos_joints=np.array([int(j.qposadr[0]) for j in joints], np.int32),
         qvel_joints=np.array([int(j.dofadr[0]) for j in joints], np.int32),
     )
@@ -357,8 +353,9 @@ def standing_qpos(xy: tuple[float, float] = (0.0, 0.0), z: float = 0.445) -> np.
 
 
 def sphere_contact_rows(mj_model: mujoco.MjModel, ids: RobotIds) -> dict[str, np.ndarray | None]:
-    """{group: [4, ncon_per_sphere] rows of MJX's contact array} for each sphere group (None for
-    a group that does not collide).
+    """{group: [4, rows per leg] rows of MJX's contact array} for each sphere group (None for
+    a group that does not collide); a leg's "shin" rows are its mid-shin sphere's and its calf
+    chain's (with calf_collision), the trunk group's [4 or 5, ncon] one sphere each.
 
     MJX lays contacts out by collision-function group, each geom pair repeated ncon times; the
     layout is static, so it is read once here (tests check it against a forward pass).
@@ -374,13 +371,14 @@ def sphere_contact_rows(mj_model: mujoco.MjModel, ids: RobotIds) -> dict[str, np
             rows[int(g1)].extend(range(i, i + ncon))
             i += ncon
     out = {}
+    calf = [ids.shin_geoms[i:i + 1].tolist() + ids.calf_geoms[i].tolist() for i in range(4)]
     for group, geoms in (
-        ("foot", ids.foot_geoms),
-        ("knee", ids.knee_geoms),
-        ("shin", ids.shin_geoms),
-        ("trunk", ids.trunk_geoms),
+        ("foot", ids.foot_geoms[:, None]),
+        ("knee", ids.knee_geoms[:, None]),
+        ("shin", calf),  # the mid-shin sphere and the calf chain: one calf's contacts
+        ("trunk", ids.trunk_geoms[:, None]),
     ):
-        per = [rows.get(int(g), []) for g in geoms]
+        per = [sum((rows.get(int(g), []) for g in leg), []) for leg in geoms]
         if all(len(p) == 0 for p in per):  # a group without collision, e.g. shins switched off
             out[group] = None
         elif len({len(p) for p in per}) != 1:

@@ -204,6 +204,8 @@ def _header(config: ExperimentConfig, env) -> dict[str, Any]:
             "timestep": config.env.robot.timestep,
             "decimation": config.env.decimation,
             "shin_collision": config.env.robot.shin_collision,
+            "head_collision": config.env.robot.head_collision,
+            "calf_collision": config.env.robot.calf_collision,
             "terrain_contacts": config.env.robot.terrain_contacts,
         },
         "network": {"conv_impl": config.network.conv_impl},

@@ -126,7 +126,8 @@ def physics_settings(env: StairEnv | EnvConfig) -> dict[str, Any]:
             "decimation": config.decimation,
             # the robot's own, from the policy's config (or an override): not the preset's
             "joint_damping": robot.joint_damping, "implicit_damping": robot.implicit_damping,
-            "head_collision": robot.head_collision, "action_delay_s": robot.action_delay_s,
+            "head_collision": robot.head_collision, "calf_collision": robot.calf_collision,
+            "action_delay_s": robot.action_delay_s,
             "contact_timeconst": robot.contact_timeconst}
 
 

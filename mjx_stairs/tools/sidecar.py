@@ -113,6 +113,7 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         else [damping, damping],
         "joint_damping_integration": "implicit" if cfg.robot.implicit_damping else "explicit",
         "head_collision": cfg.robot.head_collision,
+        "calf_collision": cfg.robot.calf_collision,
         # every contact's solref time constant (robot and stairs); the MJCF's is MuJoCo's default
         "contact_timeconst_s": cfg.robot.contact_timeconst or solref.MJCF_TIMECONST_S,
         "action_delay_s": list(r.action_delay_s) if r.enabled and r.action_delay_s[1] > 0

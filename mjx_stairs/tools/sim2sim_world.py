@@ -204,7 +204,10 @@ def _parts(model: mujoco.MjModel, terrain: np.ndarray) -> np.ndarray:
             continue
         name = model.body(b).name.lower()
         sphere = model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE
-        if "foot" in name or "foot" in model.geom(g).name.lower() or (sphere and "calf" in name):
+        geom = model.geom(g).name.lower()
+        if "calf" in geom and "foot" not in geom:  # e.g. go2.xml's calf chain (sim.geoms)
+            out[g] = PARTS.index("calf")
+        elif "foot" in name or "foot" in geom or (sphere and "calf" in name):
             out[g] = PARTS.index("foot")
         elif "calf" in name:
             out[g] = PARTS.index("calf")

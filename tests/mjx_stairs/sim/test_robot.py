@@ -1,5 +1,7 @@
 """The Go2 model: compiles in MuJoCo and MJX, matches the reference, stands, and touches terrain."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import mujoco
@@ -195,3 +197,64 @@ def test_contact_timeconst_stiffens_both_simulators_contacts():
     assert 0 < sink[0.01] < 0.7 * sink[0.0]
     with pytest.raises(ConfigError, match="env.robot.contact_timeconst"):
         rb.RobotConfig(contact_timeconst=0.005)
+
+
+def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
+    """robot.calf_collision: four spheres along each calf close the bare stretches between the
+    knee, mid-shin and foot spheres (no gap along the knee-foot axis wider than 1 cm); a column
+    poking 5 mm into the front-left calf's upper stretch is a calf contact of that leg alone in
+    MJX (our columns collider) and touches the chain in the ground truth's box world, where the
+    robot without the chain touches nothing."""
+    from mjx_stairs.sim import box_world, geoms
+    from mjx_stairs.tools import sim2sim_world as sw
+
+    cfg = rb.RobotConfig(terrain_contacts="columns", calf_collision=True)
+    res = 0.025
+    heights = np.zeros((41, 41), np.float32)
+    model = rb.build_mj_model(heights, res, cfg)
+    ids = rb.robot_ids(model)
+    assert ids.calf_geoms.shape == (4, len(geoms.CALF_DEPTHS))
+    assert rb.robot_ids(rb.build_mj_model(heights, res)).calf_geoms.shape == (4, 0)
+    # coverage along the FL calf's knee-foot axis, every sphere on it (the shin is 4 mm off it)
+    leg = [model.geom(f"FL_{p}") for p in ("knee", "shin", "foot")]
+    leg += [model.geom(n) for n in geoms.calf_chain_names("FL")]
+    axis = np.array([-0.002, 0.0, -0.213]) / np.linalg.norm([-0.002, 0.0, -0.213])
+    spans = sorted((g.pos @ axis - g.size[0], g.pos @ axis + g.size[0]) for g in leg)
+    assert spans[0][0] <= 0 and spans[-1][1] >= 0.213
+    gaps = [b[0] - a[1] for a, b in zip(spans[:-1], spans[1:], strict=True)]
+    assert max(gaps) < 0.01, gaps
+    # a column under the first chain sphere, its top 5 mm above the sphere's bottom
+    qpos = rb.standing_qpos((0.5, 0.5), 0.445)
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    centre = data.geom_xpos[model.geom("FL_calf_chain0").id]
+    ix, iy = np.round(centre[:2] / res).astype(int)
+    heights[iy, ix] = centre[2] - geoms.CALF_RADIUS + 0.005
+    touching = {}
+    for calf in (False, True):
+        m = rb.build_mj_model(heights, res, dataclasses.replace(cfg, calf_collision=calf))
+        d = jax.jit(mjx.forward)(mjx.put_model(m), mjx.make_data(m).replace(
+            qpos=jnp.asarray(qpos)))
+        touching[calf] = {k: np.asarray(v).tolist()
+                          for k, v in rb.sphere_contacts(d, rb.sphere_contact_rows(
+                              m, rb.robot_ids(m))).items()}
+    assert touching[True]["shin"] == [True, False, False, False]
+    assert not any(any(v) for v in touching[False].values()), touching[False]
+    assert not any(touching[True][g][i] for g in ("foot", "knee", "trunk") for i in range(4))
+    # the same column as a box in the ground truth's world
+    box = [ix * res, iy * res, heights[iy, ix] / 2, res / 2, res / 2, heights[iy, ix] / 2]
+    for calf in (False, True):
+        world = box_world.build_model(np.array([box]),
+                                      dataclasses.replace(cfg, calf_collision=calf))
+        wd = mujoco.MjData(world)
+        wd.qpos[:] = qpos
+        mujoco.mj_forward(world, wd)
+        names = {world.geom(int(g)).name for g in wd.contact.geom[:wd.ncon].ravel()}
+        assert (names & set(geoms.calf_chain_names("FL")) != set()) == calf, names
+        assert names <= {"stair0", *geoms.calf_chain_names("FL")}, names
+        if calf:  # sim2sim's step-edge counts: the chain's touches are calf touches
+            stairs = np.array([world.geom(g).name == "stair0" for g in range(world.ngeom)])
+            parts = [sw.PARTS[i] for i in sw._parts(world, stairs)]
+            assert {parts[world.geom(n).id] for n in geoms.calf_chain_names("RR")} == {"calf"}
+            assert parts[world.geom("RR_foot").id] == "foot"

@@ -338,4 +338,5 @@ def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
     t = side["training"]
     assert t["joint_damping_nms_rad"] == [0.1, 0.1]
     assert t["joint_damping_integration"] == "explicit" and t["head_collision"] is False
+    assert t["calf_collision"] is False
     assert t["contact_timeconst_s"] == 0.02  # go2.xml's solref (env.robot.contact_timeconst 0)

@@ -1,0 +1,67 @@
+"""Collision spheres that a `RobotConfig` adds to assets/go2.xml: the head and the calf chains.
+
+go2.xml collides through spheres only (feet, knees, mid-shins, trunk corners), which leaves
+two stretches of each calf bare: between the knee sphere (r 0.025 at the knee) and the mid-shin
+one (r 0.018 at 0.11 m), and between that and the foot (r 0.022 at 0.213 m). In MuJoCo itself
+the full robot's calf capsules (assets/go2_full.xml, r 0.013) touch step edges there: up to 100
+times an episode for a generalist at the Go2's joint damping of 2, where training saw nothing
+(docs/deploy.md, session 31). `CALF_CHAIN` fills both stretches with spheres of the capsule's
+radius, so that MJX sees what touches a real step edge through the sphere colliders it already
+has (the heightfield and column colliders of `sim.contact`).
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+HEAD = ("trunk_head", (0.293, 0.0, -0.06), 0.047)
+"""(name, position in the base frame, radius) of the head sphere that `RobotConfig.head_collision`
+adds to the trunk group: the lower head sphere of assets/go2_full.xml, 12 cm ahead of the trunk
+corners; in sim2sim the head touches step edges up to 12 times per episode up 14 cm risers."""
+
+CALF_RADIUS = 0.013
+"""Radius (m) of the calf-chain spheres: go2_full.xml's calf capsule."""
+
+CALF_DEPTHS = (0.047, 0.070, 0.150, 0.172)
+"""Depths (m) below the knee of the calf-chain spheres along the calf's axis, which runs from
+the knee to the foot at (-0.002, 0, -0.213): two in each bare stretch, so that no gap between
+neighbouring spheres (knee and foot spheres included) is wider than 1 cm."""
+
+
+def calf_chain_positions() -> np.ndarray:
+    """[len(CALF_DEPTHS), 3] sphere centres in the calf body's frame, on the knee-foot axis."""
+    depth = np.asarray(CALF_DEPTHS)
+    return np.stack([-0.002 * depth / 0.213, np.zeros_like(depth), -depth], axis=-1)
+
+
+def calf_chain_names(leg: str) -> tuple[str, ...]:
+    """Geom names of one leg's calf chain (leg: FL, FR, RL or RR)."""
+    return tuple(f"{leg}_calf_chain{i}" for i in range(len(CALF_DEPTHS)))
+
+
+def _collide_like(geom, like) -> None:
+    for attr in ("contype", "conaffinity", "condim", "friction", "solref", "solimp", "solmix",
+                 "margin", "gap", "priority", "group"):
+        setattr(geom, attr, getattr(like, attr))
+
+
+def add_head(spec: mujoco.MjSpec) -> None:
+    """The head sphere (HEAD) on the base, colliding as the trunk-corner spheres do."""
+    name, pos, radius = HEAD
+    head = spec.body("base").add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                                      size=[radius, 0.0, 0.0], pos=list(pos))
+    _collide_like(head, spec.geom("trunk_fl"))
+
+
+def add_calf_chains(spec: mujoco.MjSpec, legs: tuple[str, ...]) -> None:
+    """Each leg's calf chain (CALF_DEPTHS, CALF_RADIUS) on its calf body, massless, colliding
+    as that leg's mid-shin sphere does."""
+    for leg in legs:
+        like = spec.geom(f"{leg}_shin")
+        body = spec.body(f"{leg}_calf")
+        for name, pos in zip(calf_chain_names(leg), calf_chain_positions(), strict=True):
+            geom = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                                 size=[CALF_RADIUS, 0.0, 0.0], pos=pos.tolist())
+            geom.density = 0.0
+            _collide_like(geom, like)
