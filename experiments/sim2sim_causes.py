@@ -28,7 +28,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_stairs.sim.geoms import add_calf_chains
+from mjx_stairs.sim.geoms import add_calf_chains, collide_like
 from mjx_stairs.sim.robot import ASSET, JOINT_NAMES, LEGS
 
 ASSETS = ASSET.parent
@@ -57,7 +57,23 @@ def _default_solver(spec: mujoco.MjSpec) -> None:
     spec.option.iterations, spec.option.ls_iterations = 100, 50
 
 
+def _training_calves(spec: mujoco.MjSpec) -> None:
+    """go2_full.xml's calf capsules replaced by go2.xml's knee and mid-shin spheres and the calf
+    chain (sim.geoms), colliding as the capsules did; all named *_calf_*, so that sim2sim counts
+    their step-edge touches as calf touches, as the capsules' are."""
+    train = mujoco.MjSpec.from_file(str(ASSET))
+    for leg in LEGS:
+        for part in ("knee", "shin"):
+            src = train.geom(f"{leg}_{part}")
+            geom = spec.body(f"{leg}_calf").add_geom(name=f"{leg}_calf_{part}", type=src.type,
+                                                     size=src.size, pos=src.pos, density=0.0)
+            collide_like(geom, spec.geom(f"{leg}_calf_col"))
+    add_calf_chains(spec, LEGS, "{leg}_calf_col")
+    _drop_geoms(spec, CALVES)
+
+
 HEAD = ("trunk_head_upper", "trunk_head_lower")
+CALVES = tuple(f"{leg}_calf_col" for leg in LEGS)
 VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "full": ("go2_full.xml", lambda s: None, "the sim2sim robot as it is"),
     "damping01": ("go2_full.xml", lambda s: _joints(s, damping=0.1),
@@ -77,6 +93,11 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                                          _integrator(s, "implicitfast"), _default_solver(s),
                                          add_calf_chains(s, LEGS)),
                    "`spheres` with the calf chains of robot.calf_collision (sim.geoms)"),
+    "no_calf": ("go2_full.xml", lambda s: _drop_geoms(s, CALVES),
+                "no calf capsules (the calves touch nothing; the feet still do)"),
+    "full_calf_chain": ("go2_full.xml", _training_calves,
+                        "each calf capsule replaced by training's calf with robot.calf_collision "
+                        "(knee and mid-shin spheres of go2.xml and the chain)"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "

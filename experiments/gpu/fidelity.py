@@ -69,6 +69,13 @@ OPTIONS = {  # env overrides of each physics option
     # run with the same contact (`gt --timeconst 0.01`), not the default one; the evaluation
     # physics since 2026-11-28 (mjx_evaluation_stiff/), the preset robot.physics=evaluation
     "evaluation_stiff": ("robot.physics=evaluation", "robot.contact_timeconst=0.01"),
+    # issue 22's "faster collision for what is missing": the calves as collision geometry
+    # (robot.calf_collision, four spheres more per calf; sim.geoms), in the evaluation physics
+    # and in the fastest physics that kept the shin spheres (bench-options, stage2-physics)
+    "evaluation_stiff_calf": ("robot.physics=evaluation", "robot.contact_timeconst=0.01",
+                              "robot.calf_collision=true"),
+    "nearest_full_calf": ("robot.terrain_contacts=nearest", "robot.shin_collision=true",
+                          "robot.ls_iterations=5", "robot.calf_collision=true"),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
     # (8): is a few iterations' convergence enough? With today's evaluation physics's sunk rule
     # (nearest face; their speed, run.sh step bench-options, was measured 2026-11-25 with the

@@ -40,7 +40,7 @@ def calf_chain_names(leg: str) -> tuple[str, ...]:
     return tuple(f"{leg}_calf_chain{i}" for i in range(len(CALF_DEPTHS)))
 
 
-def _collide_like(geom, like) -> None:
+def collide_like(geom, like) -> None:
     for attr in ("contype", "conaffinity", "condim", "friction", "solref", "solimp", "solmix",
                  "margin", "gap", "priority", "group"):
         setattr(geom, attr, getattr(like, attr))
@@ -51,17 +51,18 @@ def add_head(spec: mujoco.MjSpec) -> None:
     name, pos, radius = HEAD
     head = spec.body("base").add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_SPHERE,
                                       size=[radius, 0.0, 0.0], pos=list(pos))
-    _collide_like(head, spec.geom("trunk_fl"))
+    collide_like(head, spec.geom("trunk_fl"))
 
 
-def add_calf_chains(spec: mujoco.MjSpec, legs: tuple[str, ...]) -> None:
+def add_calf_chains(spec: mujoco.MjSpec, legs: tuple[str, ...], like: str = "{leg}_shin") -> None:
     """Each leg's calf chain (CALF_DEPTHS, CALF_RADIUS) on its calf body, massless, colliding
-    as that leg's mid-shin sphere does."""
+    as that leg's geom `like` does (go2.xml's mid-shin sphere; e.g. "{leg}_calf_col" in
+    go2_full.xml)."""
     for leg in legs:
-        like = spec.geom(f"{leg}_shin")
+        like_geom = spec.geom(like.format(leg=leg))
         body = spec.body(f"{leg}_calf")
         for name, pos in zip(calf_chain_names(leg), calf_chain_positions(), strict=True):
             geom = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_SPHERE,
                                  size=[CALF_RADIUS, 0.0, 0.0], pos=pos.tolist())
             geom.density = 0.0
-            _collide_like(geom, like)
+            collide_like(geom, like_geom)
