@@ -57,18 +57,36 @@ def _default_solver(spec: mujoco.MjSpec) -> None:
     spec.option.iterations, spec.option.ls_iterations = 100, 50
 
 
-def _training_calves(spec: mujoco.MjSpec) -> None:
+def _training_calves(spec: mujoco.MjSpec, parts=("knee", "shin"), chain: bool = True,
+                     drop: bool = True) -> None:
     """go2_full.xml's calf capsules replaced by go2.xml's knee and mid-shin spheres and the calf
     chain (sim.geoms), colliding as the capsules did; all named *_calf_*, so that sim2sim counts
-    their step-edge touches as calf touches, as the capsules' are."""
+    their step-edge touches as calf touches, as the capsules' are. Or some of that: `parts` of
+    go2.xml's spheres, the `chain` or not, the capsules dropped or not."""
     train = mujoco.MjSpec.from_file(str(ASSET))
     for leg in LEGS:
-        for part in ("knee", "shin"):
+        for part in parts:
             src = train.geom(f"{leg}_{part}")
             geom = spec.body(f"{leg}_calf").add_geom(name=f"{leg}_calf_{part}", type=src.type,
                                                      size=src.size, pos=src.pos, density=0.0)
             collide_like(geom, spec.geom(f"{leg}_calf_col"))
-    add_calf_chains(spec, LEGS, "{leg}_calf_col")
+    if chain:
+        add_calf_chains(spec, LEGS, "{leg}_calf_col")
+    if drop:
+        _drop_geoms(spec, CALVES)
+
+
+def _dense_calves(spec: mujoco.MjSpec, n: int = 15) -> None:
+    """Each calf capsule replaced by `n` spheres of its radius along its axis, spaced less than
+    a radius apart (no knee or mid-shin sphere): the capsule's shape as spheres."""
+    for leg in LEGS:
+        cap = spec.geom(f"{leg}_calf_col")
+        a, b = np.asarray(cap.fromto[:3]), np.asarray(cap.fromto[3:])
+        for i, t in enumerate(np.linspace(0.0, 1.0, n)):
+            geom = spec.body(f"{leg}_calf").add_geom(
+                name=f"{leg}_calf_dense{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                size=[cap.size[0], 0.0, 0.0], pos=(a + t * (b - a)).tolist(), density=0.0)
+            collide_like(geom, cap)
     _drop_geoms(spec, CALVES)
 
 
@@ -98,6 +116,10 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "full_calf_chain": ("go2_full.xml", _training_calves,
                         "each calf capsule replaced by training's calf with robot.calf_collision "
                         "(knee and mid-shin spheres of go2.xml and the chain)"),
+    "full_knee": ("go2_full.xml", lambda s: _training_calves(s, ("knee",), False, False),
+                  "go2.xml's knee sphere (r 0.025) added to each calf, the capsules kept"),
+    "full_dense": ("go2_full.xml", _dense_calves,
+                   "each calf capsule replaced by 15 spheres of its radius along its axis"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "

@@ -94,7 +94,7 @@ class RobotConfig:
     # A collision sphere on the head (HEAD), a trunk sphere (trunk-contact ending, collision
     # penalty). Off: go2.xml's spheres alone, as every policy up to 2026-11-26 trained.
     head_collision: bool = False
-    # Four spheres more along each calf (geoms.CALF_CHAIN: the bare stretches between the knee,
+    # Eight spheres more along each calf (geoms.CALF_DEPTHS: the bare stretches between the knee,
     # mid-shin and foot spheres, at the full robot's calf radius), counted as calf contacts. Off:
     # go2.xml's spheres alone, as every policy up to 2026-11-29 trained.
     calf_collision: bool = False
@@ -185,7 +185,7 @@ class RobotIds:
     knee_geoms: np.ndarray  # [4]
     shin_geoms: np.ndarray  # [4]
     trunk_geoms: np.ndarray  # [4] corners (+ the head with head_collision: [5])
-    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 4 with calf_collision, else 0)
+    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 8 with calf_collision, else 0)
     qpos_joints: np.ndarray  # [12] qpos addresses of the joints, in JOINT_NAMES order
     qvel_joints: np.ndarray  # [12] qvel addresses of the joints
 
