@@ -76,9 +76,11 @@ def _training_calves(spec: mujoco.MjSpec, parts=("knee", "shin"), chain: bool = 
         _drop_geoms(spec, CALVES)
 
 
-def _dense_calves(spec: mujoco.MjSpec, n: int = 15) -> None:
+def _dense_calves(spec: mujoco.MjSpec, n: int = 15, parts=()) -> None:
     """Each calf capsule replaced by `n` spheres of its radius along its axis, spaced less than
-    a radius apart (no knee or mid-shin sphere): the capsule's shape as spheres."""
+    a radius apart: the capsule's shape as spheres (with go2.xml's `parts`, e.g. its mid-shin
+    sphere, r 0.018 and 4 mm ahead of the axis, named *_calf_*)."""
+    _training_calves(spec, parts, chain=False, drop=False)
     for leg in LEGS:
         cap = spec.geom(f"{leg}_calf_col")
         a, b = np.asarray(cap.fromto[:3]), np.asarray(cap.fromto[3:])
@@ -120,6 +122,8 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                   "go2.xml's knee sphere (r 0.025) added to each calf, the capsules kept"),
     "full_dense": ("go2_full.xml", _dense_calves,
                    "each calf capsule replaced by 15 spheres of its radius along its axis"),
+    "full_dense_shin": ("go2_full.xml", lambda s: _dense_calves(s, parts=("shin",)),
+                        "`full_dense` with go2.xml's mid-shin sphere (r 0.018) on each calf"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "
