@@ -8,10 +8,11 @@ times an episode for a generalist at the Go2's joint damping of 2, where trainin
 (docs/deploy.md, session 31). `CALF_DEPTHS` fills both stretches with spheres of the capsule's
 radius, so that MJX sees what touches a real step edge through the sphere colliders it already
 has (the heightfield and column colliders of `sim.contact`). A chain must overlap, not only
-touch: a sharp step edge passes through any gap between two spheres. A first chain of four
-spheres per calf, gaps under 1 cm, in place of the full robot's capsules in MuJoCo itself climbed
-like training's spheres without it (71 % against 70, L-shaped level 6 at damping 2), where the
-capsule climbed 33 % and 15 spheres along the capsule 28 % (docs/deploy.md, session 32).
+touch: a sharp step edge passes through any gap between two spheres. What it does not change is
+go2.xml's mid-shin sphere, 5-9 mm proud of the capsule's front: on L-shaped level 6 at damping 2
+MuJoCo itself climbed 33 % with the full robot's straight capsule, 28 with the capsule as 15
+spheres, 71 with those and the mid-shin sphere, 71 with training's calf and this chain in its
+place (docs/deploy.md, session 32): the two robots' calves differ by that bump, chain or not.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ def calf_chain_names(leg: str) -> tuple[str, ...]:
 
 
 def collide_like(geom, like) -> None:
+    """Give MjSpec geom `geom` the contact settings of geom `like` (what it collides with, how)."""
     for attr in ("contype", "conaffinity", "condim", "friction", "solref", "solimp", "solmix",
                  "margin", "gap", "priority", "group"):
         setattr(geom, attr, getattr(like, attr))
