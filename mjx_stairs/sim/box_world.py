@@ -86,6 +86,17 @@ def build_model(
     if not config.shin_collision:
         for name in rb.SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0
+    _pd_actuators(spec, config)
+    model = spec.compile()
+    order = [model.actuator(i).trnid[0] for i in range(model.nu)]
+    if order != [model.joint(n).id for n in rb.JOINT_NAMES]:
+        raise ValueError("go2.xml's actuators are not in JOINT_NAMES order")
+    return model
+
+
+def _pd_actuators(spec: mujoco.MjSpec, config: rb.RobotConfig) -> None:
+    """Each joint's actuator as PD on its target (`config.kp` / `config.kd`), its force clamped at
+    the reference torque limit times `config.torque_scale`."""
     limits = rb.TORQUE_LIMIT * config.torque_scale
     for joint, limit in zip(rb.JOINT_NAMES, limits, strict=True):
         act = next(a for a in spec.actuators if a.target == joint)
@@ -96,11 +107,6 @@ def build_model(
         act.ctrllimited = False
         act.forcelimited = True
         act.forcerange = [-float(limit), float(limit)]
-    model = spec.compile()
-    order = [model.actuator(i).trnid[0] for i in range(model.nu)]
-    if order != [model.joint(n).id for n in rb.JOINT_NAMES]:
-        raise ValueError("go2.xml's actuators are not in JOINT_NAMES order")
-    return model
 
 
 class Batch:
