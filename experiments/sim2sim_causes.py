@@ -92,6 +92,26 @@ def _dense_calves(spec: mujoco.MjSpec, n: int = 15, parts=()) -> None:
     _drop_geoms(spec, CALVES)
 
 
+BOWED_CALF = (((-0.0045, 0.0, -0.0013), (0.0205, 0.0, -0.1187), 0.013),
+              ((0.0216, 0.0, -0.1155), (0.0184, 0.0, -0.1805), 0.011))
+"""(from, to, radius) in the calf frame of two capsules that follow the Go2's calf link as MuJoCo
+Menagerie's unitree_go2 (BSD-3) models it with two cylinders: 1-2 cm ahead of the knee-foot
+axis at mid-calf, which `go2_full.xml`'s straight capsule is not (reference data, read off its
+cylinders' centres, half-lengths and tilts)."""
+
+
+def _bowed_calves(spec: mujoco.MjSpec) -> None:
+    """Each calf capsule replaced by the two of BOWED_CALF, colliding as it did."""
+    for leg in LEGS:
+        cap = spec.geom(f"{leg}_calf_col")
+        for i, (a, b, r) in enumerate(BOWED_CALF):
+            geom = spec.body(f"{leg}_calf").add_geom(
+                name=f"{leg}_calf_bowed{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                size=[r, 0.0, 0.0], fromto=[*a, *b], density=0.0)
+            collide_like(geom, cap)
+    _drop_geoms(spec, CALVES)
+
+
 HEAD = ("trunk_head_upper", "trunk_head_lower")
 CALVES = tuple(f"{leg}_calf_col" for leg in LEGS)
 VARIANTS = {  # name: (base MJCF, edit, what it changes)
@@ -124,6 +144,9 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                    "each calf capsule replaced by 15 spheres of its radius along its axis"),
     "full_dense_shin": ("go2_full.xml", lambda s: _dense_calves(s, parts=("shin",)),
                         "`full_dense` with go2.xml's mid-shin sphere (r 0.018) on each calf"),
+    "full_bowed": ("go2_full.xml", _bowed_calves,
+                   "each calf capsule replaced by two following the link's forward bow "
+                   "(MuJoCo Menagerie's Go2 calf cylinders)"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "
