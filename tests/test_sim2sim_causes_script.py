@@ -30,3 +30,25 @@ def test_code_cells_are_the_suites_cases():
         causes.check_cell("code", "commercial_ramp_up")
     with pytest.raises(SystemExit, match="up6"):  # a family cell is not a code case
         causes.check_cell("code", "up6")
+
+
+def test_every_robot_variant_compiles_and_changes_collision_alone(tmp_path):
+    """Each variant's MJCF loads in MuJoCo; the calf variants (one edit of go2_full.xml's calves)
+    put the geoms they name on each calf, colliding with the capsule's friction."""
+    import mujoco
+
+    full = mujoco.MjModel.from_xml_path(str(causes.write_robot("full", tmp_path)))
+    calf = [v for v in causes.VARIANTS if v.startswith("full_") or v == "no_calf"]
+    assert {"full_bowed", "full_dense", "full_calf_chain"} <= set(calf)
+    for variant in causes.VARIANTS:
+        model = mujoco.MjModel.from_xml_path(str(causes.write_robot(variant, tmp_path)))
+        if variant not in calf:
+            continue
+        body = model.body("FL_calf").id
+        geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body
+                 and model.geom_contype[g] and "foot" not in model.geom(g).name.lower()]
+        assert len(geoms) == {"no_calf": 0, "full_knee": 2, "full_bowed": 2, "full_dense": 15,
+                              "full_dense_shin": 16}.get(variant, len(geoms)), variant
+        for g in geoms:
+            assert model.geom_friction[g].tolist() == full.geom_friction[
+                full.geom("FL_calf_col").id].tolist()
