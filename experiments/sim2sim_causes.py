@@ -57,6 +57,19 @@ def _default_solver(spec: mujoco.MjSpec) -> None:
     spec.option.iterations, spec.option.ls_iterations = 100, 50
 
 
+def _on_calf(spec: mujoco.MjSpec, leg: str, name: str, **fields) -> None:
+    """A massless geom `name` on the leg's calf body, colliding as its capsule does."""
+    geom = spec.body(f"{leg}_calf").add_geom(name=name, density=0.0, **fields)
+    collide_like(geom, spec.geom(f"{leg}_calf_col"))
+
+
+def _as_full(spec: mujoco.MjSpec) -> None:
+    """go2.xml given the sim2sim robot's joints, integrator and solver (go2_full.xml's)."""
+    _joints(spec, damping=2.0, frictionloss=0.2)
+    _integrator(spec, "implicitfast")
+    _default_solver(spec)
+
+
 def _training_calves(spec: mujoco.MjSpec, parts=("knee", "shin"), chain: bool = True,
                      drop: bool = True) -> None:
     """go2_full.xml's calf capsules replaced by go2.xml's knee and mid-shin spheres and the calf
@@ -67,9 +80,7 @@ def _training_calves(spec: mujoco.MjSpec, parts=("knee", "shin"), chain: bool = 
     for leg in LEGS:
         for part in parts:
             src = train.geom(f"{leg}_{part}")
-            geom = spec.body(f"{leg}_calf").add_geom(name=f"{leg}_calf_{part}", type=src.type,
-                                                     size=src.size, pos=src.pos, density=0.0)
-            collide_like(geom, spec.geom(f"{leg}_calf_col"))
+            _on_calf(spec, leg, f"{leg}_calf_{part}", type=src.type, size=src.size, pos=src.pos)
     if chain:
         add_calf_chains(spec, LEGS, "{leg}_calf_col")
     if drop:
@@ -85,10 +96,8 @@ def _dense_calves(spec: mujoco.MjSpec, n: int = 15, parts=()) -> None:
         cap = spec.geom(f"{leg}_calf_col")
         a, b = np.asarray(cap.fromto[:3]), np.asarray(cap.fromto[3:])
         for i, t in enumerate(np.linspace(0.0, 1.0, n)):
-            geom = spec.body(f"{leg}_calf").add_geom(
-                name=f"{leg}_calf_dense{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                size=[cap.size[0], 0.0, 0.0], pos=(a + t * (b - a)).tolist(), density=0.0)
-            collide_like(geom, cap)
+            _on_calf(spec, leg, f"{leg}_calf_dense{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                     size=[cap.size[0], 0.0, 0.0], pos=(a + t * (b - a)).tolist())
     _drop_geoms(spec, CALVES)
 
 
@@ -103,12 +112,9 @@ cylinders' centres, half-lengths and tilts)."""
 def _bowed_calves(spec: mujoco.MjSpec) -> None:
     """Each calf capsule replaced by the two of BOWED_CALF, colliding as it did."""
     for leg in LEGS:
-        cap = spec.geom(f"{leg}_calf_col")
         for i, (a, b, r) in enumerate(BOWED_CALF):
-            geom = spec.body(f"{leg}_calf").add_geom(
-                name=f"{leg}_calf_bowed{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                size=[r, 0.0, 0.0], fromto=[*a, *b], density=0.0)
-            collide_like(geom, cap)
+            _on_calf(spec, leg, f"{leg}_calf_bowed{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                     size=[r, 0.0, 0.0], fromto=[*a, *b])
     _drop_geoms(spec, CALVES)
 
 
@@ -126,12 +132,8 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                        "semi-implicit Euler, damping explicit (training's integrator)"),
     "no_head": ("go2_full.xml", lambda s: _drop_geoms(s, HEAD),
                 "no head geoms (training's trunk spheres do not reach the head)"),
-    "spheres": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
-                                      _integrator(s, "implicitfast"), _default_solver(s)),
-                "training's collision spheres, everything else as `full`"),
-    "calf_chain": ("go2.xml", lambda s: (_joints(s, damping=2.0, frictionloss=0.2),
-                                         _integrator(s, "implicitfast"), _default_solver(s),
-                                         add_calf_chains(s, LEGS)),
+    "spheres": ("go2.xml", _as_full, "training's collision spheres, everything else as `full`"),
+    "calf_chain": ("go2.xml", lambda s: (_as_full(s), add_calf_chains(s, LEGS)),
                    "`spheres` with the calf chains of robot.calf_collision (sim.geoms)"),
     "no_calf": ("go2_full.xml", lambda s: _drop_geoms(s, CALVES),
                 "no calf capsules (the calves touch nothing; the feet still do)"),

@@ -20,7 +20,6 @@ import numpy as np
 from mujoco import rollout
 
 from mjx_stairs.sim import robot as rb
-from mjx_stairs.sim import solref
 
 STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 """What a rollout carries from one policy step to the next: time, qpos, qvel, act, ... ."""
@@ -75,17 +74,7 @@ def build_model(
             material="terrain",
             friction=[config.friction, 0.02, 0.01],
         )
-    for name in rb.SPHERE_GROUPS["foot"]:
-        spec.geom(name).friction = [config.friction, 0.02, 0.01]
-    rb.set_joint_damping(spec, config)
-    if config.head_collision:
-        rb.add_head(spec)
-    if config.calf_collision:
-        rb.add_calf_chains(spec, rb.LEGS)
-    solref.set_timeconst(spec, config.contact_timeconst)
-    if not config.shin_collision:
-        for name in rb.SPHERE_GROUPS["shin"]:
-            spec.geom(name).contype = 0
+    rb.apply_robot_settings(spec, config)
     _pd_actuators(spec, config)
     model = spec.compile()
     order = [model.actuator(i).trnid[0] for i in range(model.nu)]

@@ -229,17 +229,7 @@ def build_mj_model(
     name = contact.COLUMNS_EXIT_HFIELD if config.sunk_exit == "nearest" else contact.COLUMNS_HFIELD
     add_heightfield(spec, heights, resolution, config.friction,
                     hfield_name=name if columns else "terrain")
-    for name in SPHERE_GROUPS["foot"]:
-        spec.geom(name).friction = [config.friction, 0.02, 0.01]
-    set_joint_damping(spec, config)
-    if config.head_collision:
-        add_head(spec)
-    if config.calf_collision:
-        add_calf_chains(spec, LEGS)
-    solref.set_timeconst(spec, config.contact_timeconst)
-    if not config.shin_collision:
-        for name in SPHERE_GROUPS["shin"]:
-            spec.geom(name).contype = 0
+    apply_robot_settings(spec, config)
     if config.terrain_contacts in ("nearest", "columns"):
         # The same spheres as ellipsoids with equal radii: MJX then collides them with the
         # terrain through mjx_stairs.sim.contact (registered for heightfield-ellipsoid pairs;
@@ -255,6 +245,30 @@ def build_mj_model(
             f"{config.terrain_contacts!r}"
         )
     return spec.compile()
+
+
+def apply_robot_settings(spec: mujoco.MjSpec, config: RobotConfig) -> None:
+    """The robot's share of `config` on go2.xml's spec, the same in MJX's model and the ground
+    truth's box world: foot friction, joint damping, the head and calf-chain spheres, every
+    contact's time constant, the mid-shin spheres on or off."""
+    for name in SPHERE_GROUPS["foot"]:
+        spec.geom(name).friction = [config.friction, 0.02, 0.01]
+    set_joint_damping(spec, config)
+    if config.head_collision:
+        add_head(spec)
+    if config.calf_collision:
+        add_calf_chains(spec, LEGS)
+    solref.set_timeconst(spec, config.contact_timeconst)
+    if not config.shin_collision:
+        for name in SPHERE_GROUPS["shin"]:
+            spec.geom(name).contype = 0
+
+
+def _calf_chain_ids(model: mujoco.MjModel) -> np.ndarray:
+    """[4, k] geom ids of each leg's calf chain (k = 0 without one)."""
+    ids = [[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in calf_chain_names(leg)]
+           for leg in LEGS]
+    return np.array([i for i in ids if min(i) >= 0], np.int32).reshape(4, -1)
 
 
 def set_joint_damping(spec: mujoco.MjSpec, config: RobotConfig) -> None:
@@ -311,10 +325,7 @@ def robot_ids(model: mujoco.MjModel) -> RobotIds:
         knee_geoms=geoms("knee"),
         shin_geoms=geoms("shin"),
         trunk_geoms=geoms("trunk"),
-        calf_geoms=np.array([[model.geom(n).id for n in calf_chain_names(leg)]
-                             if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM,
-                                                  calf_chain_names(leg)[0]) >= 0 else []
-                             for leg in LEGS], np.int32).reshape(4, -1),
+        calf_geoms=_calf_chain_ids(model),
         qpos_joints=np.array([int(j.qposadr[0]) for j in joints], np.int32),
         qvel_joints=np.array([int(j.dofadr[0]) for j in joints], np.int32),
     )
