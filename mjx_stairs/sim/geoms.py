@@ -74,3 +74,10 @@ def add_calf_chains(spec: mujoco.MjSpec, legs: tuple[str, ...], like: str = "{le
                                  size=[CALF_RADIUS, 0.0, 0.0], pos=pos.tolist())
             geom.density = 0.0
             collide_like(geom, like_geom)
+
+
+def calf_chain_ids(model: mujoco.MjModel, legs: tuple[str, ...]) -> np.ndarray:
+    """[len(legs), k] geom ids of each leg's calf chain in `model` (k = 0 without one)."""
+    ids = [[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in calf_chain_names(leg)]
+           for leg in legs]
+    return np.array([i for i in ids if min(i) >= 0], np.int32).reshape(len(legs), -1)

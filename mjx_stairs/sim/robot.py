@@ -23,7 +23,7 @@ from mujoco.mjx._src import collision_driver
 
 from mjx_stairs.config import ConfigError
 from mjx_stairs.sim import contact, solref  # contact registers the 'nearest', 'columns' colliders
-from mjx_stairs.sim.geoms import HEAD, add_calf_chains, add_head, calf_chain_names
+from mjx_stairs.sim.geoms import HEAD, add_calf_chains, add_head, calf_chain_ids
 
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
 
@@ -248,9 +248,7 @@ def build_mj_model(
 
 
 def apply_robot_settings(spec: mujoco.MjSpec, config: RobotConfig) -> None:
-    """The robot's share of `config` on go2.xml's spec, the same in MJX's model and the ground
-    truth's box world: foot friction, joint damping, the head and calf-chain spheres, every
-    contact's time constant, the mid-shin spheres on or off."""
+    """`config`'s robot settings on go2.xml's spec, for MJX's model and the box world alike."""
     for name in SPHERE_GROUPS["foot"]:
         spec.geom(name).friction = [config.friction, 0.02, 0.01]
     set_joint_damping(spec, config)
@@ -262,13 +260,6 @@ def apply_robot_settings(spec: mujoco.MjSpec, config: RobotConfig) -> None:
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0
-
-
-def _calf_chain_ids(model: mujoco.MjModel) -> np.ndarray:
-    """[4, k] geom ids of each leg's calf chain (k = 0 without one)."""
-    ids = [[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in calf_chain_names(leg)]
-           for leg in LEGS]
-    return np.array([i for i in ids if min(i) >= 0], np.int32).reshape(4, -1)
 
 
 def set_joint_damping(spec: mujoco.MjSpec, config: RobotConfig) -> None:
@@ -325,7 +316,7 @@ def robot_ids(model: mujoco.MjModel) -> RobotIds:
         knee_geoms=geoms("knee"),
         shin_geoms=geoms("shin"),
         trunk_geoms=geoms("trunk"),
-        calf_geoms=_calf_chain_ids(model),
+        calf_geoms=calf_chain_ids(model, LEGS),
         qpos_joints=np.array([int(j.qposadr[0]) for j in joints], np.int32),
         qvel_joints=np.array([int(j.dofadr[0]) for j in joints], np.int32),
     )
