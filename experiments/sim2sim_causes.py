@@ -87,41 +87,39 @@ def _training_calves(spec: mujoco.MjSpec, parts=("knee", "shin"), chain: bool = 
         _drop_geoms(spec, CALVES)
 
 
+STRAIGHT_CALF = ((0.0, 0.0, 0.0), (-0.002, 0.0, -0.19), 0.013)
+"""(from, to, radius) in the calf frame of go2_full.xml's calf until 2026-11-29: one capsule on
+the knee-foot axis (since then two along the link's bow, sim.geoms.CALF_SHAPE)."""
+
+
 def _dense_calves(spec: mujoco.MjSpec, n: int = 15, parts=()) -> None:
-    """Each calf capsule replaced by `n` spheres of its radius along its axis, spaced less than
-    a radius apart: the capsule's shape as spheres (with go2.xml's `parts`, e.g. its mid-shin
-    sphere, r 0.018 and 4 mm ahead of the axis, named *_calf_*)."""
+    """Each calf replaced by `n` spheres of the straight capsule's radius along its axis
+    (STRAIGHT_CALF), spaced less than a radius apart: that capsule's shape as spheres (with
+    go2.xml's `parts`, e.g. its mid-shin sphere, r 0.018 and 4 mm ahead of the axis, named
+    *_calf_*)."""
     _training_calves(spec, parts, chain=False, drop=False)
+    a, b, r = (np.asarray(v) for v in STRAIGHT_CALF)
     for leg in LEGS:
-        cap = spec.geom(f"{leg}_calf_col")
-        a, b = np.asarray(cap.fromto[:3]), np.asarray(cap.fromto[3:])
         for i, t in enumerate(np.linspace(0.0, 1.0, n)):
             _on_calf(spec, leg, f"{leg}_calf_dense{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                     size=[cap.size[0], 0.0, 0.0], pos=(a + t * (b - a)).tolist())
+                     size=[float(r), 0.0, 0.0], pos=(a + t * (b - a)).tolist())
     _drop_geoms(spec, CALVES)
 
 
-BOWED_CALF = (((-0.0045, 0.0, -0.0013), (0.0205, 0.0, -0.1187), 0.013),
-              ((0.0216, 0.0, -0.1155), (0.0184, 0.0, -0.1805), 0.011))
-"""(from, to, radius) in the calf frame of two capsules that follow the Go2's calf link as MuJoCo
-Menagerie's unitree_go2 (BSD-3) models it with two cylinders: 1-2 cm ahead of the knee-foot
-axis at mid-calf, which `go2_full.xml`'s straight capsule is not (reference data, read off its
-cylinders' centres, half-lengths and tilts)."""
-
-
-def _bowed_calves(spec: mujoco.MjSpec) -> None:
-    """Each calf capsule replaced by the two of BOWED_CALF, colliding as it did."""
+def _straight_calves(spec: mujoco.MjSpec) -> None:
+    """Each calf's two capsules replaced by the one straight capsule of STRAIGHT_CALF."""
+    a, b, r = STRAIGHT_CALF
     for leg in LEGS:
-        for i, (a, b, r) in enumerate(BOWED_CALF):
-            _on_calf(spec, leg, f"{leg}_calf_bowed{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                     size=[r, 0.0, 0.0], fromto=[*a, *b])
+        _on_calf(spec, leg, f"{leg}_calf_straight", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                 size=[r, 0.0, 0.0], fromto=[*a, *b])
     _drop_geoms(spec, CALVES)
 
 
 HEAD = ("trunk_head_upper", "trunk_head_lower")
-CALVES = tuple(f"{leg}_calf_col" for leg in LEGS)
+CALVES = tuple(f"{leg}_calf_col{s}" for leg in LEGS for s in ("", "_lower"))
 VARIANTS = {  # name: (base MJCF, edit, what it changes)
-    "full": ("go2_full.xml", lambda s: None, "the sim2sim robot as it is"),
+    "full": ("go2_full.xml", lambda s: None, "the sim2sim robot as it is (since 2026-11-29 its "
+             "calves bowed as the link, sim.geoms.CALF_SHAPE; before, `full_straight`)"),
     "damping01": ("go2_full.xml", lambda s: _joints(s, damping=0.1),
                   "joint damping 0.1 (training's MJCF)"),
     "no_frictionloss": ("go2_full.xml", lambda s: _joints(s, frictionloss=0.0),
@@ -143,12 +141,12 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "full_knee": ("go2_full.xml", lambda s: _training_calves(s, ("knee",), False, False),
                   "go2.xml's knee sphere (r 0.025) added to each calf, the capsules kept"),
     "full_dense": ("go2_full.xml", _dense_calves,
-                   "each calf capsule replaced by 15 spheres of its radius along its axis"),
+                   "each calf replaced by 15 spheres along the straight capsule's axis"),
     "full_dense_shin": ("go2_full.xml", lambda s: _dense_calves(s, parts=("shin",)),
                         "`full_dense` with go2.xml's mid-shin sphere (r 0.018) on each calf"),
-    "full_bowed": ("go2_full.xml", _bowed_calves,
-                   "each calf capsule replaced by two following the link's forward bow "
-                   "(MuJoCo Menagerie's Go2 calf cylinders)"),
+    "full_straight": ("go2_full.xml", _straight_calves,
+                      "each calf as one straight capsule on the knee-foot axis (go2_full.xml's "
+                      "calf until 2026-11-29)"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "

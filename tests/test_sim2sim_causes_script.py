@@ -37,9 +37,11 @@ def test_every_robot_variant_compiles_and_changes_collision_alone(tmp_path):
     put the geoms they name on each calf, colliding with the capsule's friction."""
     import mujoco
 
+    from mjx_stairs.sim.geoms import CALF_CHAIN_LEN
+
     full = mujoco.MjModel.from_xml_path(str(causes.write_robot("full", tmp_path)))
-    calf = [v for v in causes.VARIANTS if v.startswith("full_") or v == "no_calf"]
-    assert {"full_bowed", "full_dense", "full_calf_chain"} <= set(calf)
+    calf = [v for v in causes.VARIANTS if v.startswith("full") or v == "no_calf"]
+    assert {"full_straight", "full_dense", "full_calf_chain"} <= set(calf)
     for variant in causes.VARIANTS:
         model = mujoco.MjModel.from_xml_path(str(causes.write_robot(variant, tmp_path)))
         if variant not in calf:
@@ -47,8 +49,9 @@ def test_every_robot_variant_compiles_and_changes_collision_alone(tmp_path):
         body = model.body("FL_calf").id
         geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body
                  and model.geom_contype[g] and "foot" not in model.geom(g).name.lower()]
-        assert len(geoms) == {"no_calf": 0, "full_knee": 2, "full_bowed": 2, "full_dense": 15,
-                              "full_dense_shin": 16}.get(variant, len(geoms)), variant
+        assert len(geoms) == {"no_calf": 0, "full_knee": 3, "full_straight": 1, "full_dense": 15,
+                              "full_dense_shin": 16, "full_calf_chain": 2 + CALF_CHAIN_LEN,
+                              "full": 2}.get(variant, len(geoms)), variant
         for g in geoms:
             assert model.geom_friction[g].tolist() == full.geom_friction[
                 full.geom("FL_calf_col").id].tolist()

@@ -70,7 +70,8 @@ OPTIONS = {  # env overrides of each physics option
     # physics since 2026-11-28 (mjx_evaluation_stiff/), the preset robot.physics=evaluation
     "evaluation_stiff": ("robot.physics=evaluation", "robot.contact_timeconst=0.01"),
     # issue 22's "faster collision for what is missing": the calves as collision geometry
-    # (robot.calf_collision, eight spheres more per calf; sim.geoms), in the evaluation physics
+    # (robot.calf_collision, eleven spheres more per calf along its bow; sim.geoms; eight along
+    # the axis when bench-options measured it, 2026-11-29), in the evaluation physics
     # and in the fastest physics that kept the shin spheres (bench-options, stage2-physics)
     "evaluation_stiff_calf": ("robot.physics=evaluation", "robot.contact_timeconst=0.01",
                               "robot.calf_collision=true"),

@@ -94,9 +94,9 @@ class RobotConfig:
     # A collision sphere on the head (HEAD), a trunk sphere (trunk-contact ending, collision
     # penalty). Off: go2.xml's spheres alone, as every policy up to 2026-11-26 trained.
     head_collision: bool = False
-    # Eight spheres more along each calf (geoms.CALF_DEPTHS: the bare stretches between the knee,
-    # mid-shin and foot spheres, at the full robot's calf radius), counted as calf contacts. Off:
-    # go2.xml's spheres alone, as every policy up to 2026-11-29 trained.
+    # Eleven spheres more along each calf, shaped as go2_full.xml's bowed calf (geoms.CALF_SHAPE,
+    # calf_chain_spheres), counted as calf contacts. Off: go2.xml's spheres alone, as every
+    # policy up to 2026-11-29 trained.
     calf_collision: bool = False
     # Fixed action delay (s), whole physics steps (the previous target holds until then), as
     # sim2sim's --latency-ms; at most one policy step. Evaluating with a delay: `--env

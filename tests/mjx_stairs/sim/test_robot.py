@@ -200,11 +200,10 @@ def test_contact_timeconst_stiffens_both_simulators_contacts():
 
 
 def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
-    """robot.calf_collision: eight spheres along each calf close the bare stretches between the
-    knee, mid-shin and foot spheres, overlapping; a column
-    poking 5 mm into the front-left calf's upper stretch is a calf contact of that leg alone in
-    MJX (our columns collider) and touches the chain in the ground truth's box world, where the
-    robot without the chain touches nothing."""
+    """robot.calf_collision: spheres along each calf as go2_full.xml shapes it (two capsules
+    along the link's bow), overlapping; a column poking 5 mm into the front-left calf's upper
+    stretch is a calf contact of that leg alone in MJX (our columns collider) and touches the
+    chain in the ground truth's box world, where the robot without the chain touches nothing."""
     from mjx_stairs.sim import box_world, geoms
     from mjx_stairs.tools import sim2sim_world as sw
 
@@ -213,26 +212,37 @@ def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
     heights = np.zeros((41, 41), np.float32)
     model = rb.build_mj_model(heights, res, cfg)
     ids = rb.robot_ids(model)
-    assert ids.calf_geoms.shape == (4, len(geoms.CALF_DEPTHS))
+    assert ids.calf_geoms.shape == (4, geoms.CALF_CHAIN_LEN)
     assert rb.robot_ids(rb.build_mj_model(heights, res)).calf_geoms.shape == (4, 0)
-    # along the FL calf's knee-foot axis every point lies 8.8 mm deep inside one of its spheres
-    # (the capsule's radius is 13 mm): a sharp edge across the calf cannot slip between two
+    # along both axes of go2_full.xml's FL calf every point lies at least (capsule radius - 4.2
+    # mm) deep inside one sphere of training's calf: a sharp edge across the calf that reaches
+    # 4.2 mm into the full robot's calf meets a sphere, it cannot slip between two
+    full = mujoco.MjModel.from_xml_path(str(rb.ASSET.parent / "go2_full.xml"))
+    caps = [full.geom(n) for n in ("FL_calf_col", "FL_calf_col_lower")]
     leg = [model.geom(f"FL_{p}") for p in ("knee", "shin", "foot")]
     leg += [model.geom(n) for n in geoms.calf_chain_names("FL")]
-    axis = np.linspace(0.0, 1.0, 2000)[:, None] * np.array([-0.002, 0.0, -0.213])
-    depth = np.zeros(len(axis))
-    for g in leg:
-        inside = g.size[0] ** 2 - np.sum((axis - g.pos) ** 2, axis=-1)
-        depth = np.maximum(depth, np.sqrt(np.clip(inside, 0.0, None)))
-    assert depth.min() > 0.0088, (depth.min(), axis[np.argmin(depth)])
-    # a column under the first chain sphere, its top 5 mm above the sphere's bottom
+    for cap, (a, b, r) in zip(caps, geoms.CALF_SHAPE, strict=True):  # the one source of both
+        assert cap.size[0] == r
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, cap.quat)  # the geom in its calf body's frame
+        ends = [cap.pos + s * cap.size[1] * rot.reshape(3, 3)[:, 2] for s in (-1.0, 1.0)]
+        assert np.allclose(sorted(ends, key=lambda e: e[2]), sorted([b, a], key=lambda e: e[2]),
+                           atol=1e-6)
+        axis = np.asarray(a) + np.linspace(0.0, 1.0, 1000)[:, None] * (np.subtract(b, a))
+        depth = np.zeros(len(axis))
+        for g in leg:
+            inside = g.size[0] ** 2 - np.sum((axis - g.pos) ** 2, axis=-1)
+            depth = np.maximum(depth, np.sqrt(np.clip(inside, 0.0, None)))
+        assert depth.min() >= r - geoms.CALF_EDGE_GAP - 1e-6, (depth.min(), r)
+    # a column under a chain sphere between the knee and mid-shin spheres, its top 5 mm above
+    # the sphere's bottom
     qpos = rb.standing_qpos((0.5, 0.5), 0.445)
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_kinematics(model, data)
-    centre = data.geom_xpos[model.geom("FL_calf_chain0").id]
+    centre = data.geom_xpos[model.geom("FL_calf_chain2").id]
     ix, iy = np.round(centre[:2] / res).astype(int)
-    heights[iy, ix] = centre[2] - geoms.CALF_RADIUS + 0.005
+    heights[iy, ix] = centre[2] - model.geom("FL_calf_chain2").size[0] + 0.005
     touching = {}
     for calf in (False, True):
         m = rb.build_mj_model(heights, res, dataclasses.replace(cfg, calf_collision=calf))
