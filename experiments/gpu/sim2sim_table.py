@@ -46,6 +46,7 @@ sys.path.insert(0, str(ROOT))
 
 from mjx_stairs import atomic  # noqa: E402
 from mjx_stairs.tools import sim2sim as s2s  # noqa: E402
+from mjx_stairs.tools import sim2sim_world as sw  # noqa: E402
 
 FAMILIES = ("u_shaped", "straight", "l_shaped", "spiral")
 SCHEDULE = "test"
@@ -193,6 +194,7 @@ def write_cell(out: Path, cell: str, records: list[dict], args) -> None:
     records = sorted(records, key=lambda r: r["start"])
     result = {"cell": cell, **s2s.summarise(records), "policy": str(args.policy),
               "robot": args.robot or "go2_full.xml (ours)",
+              "robot_sha256": sw.file_sha256(args.robot or sw.OUR_ROBOT),
               "direction": cell_direction(cell, args.direction),
               "latency_ms": args.latency_ms, "contact_timeconst": args.contact_timeconst,
               "noise": args.noise, "push": args.push, "episode_s": args.episode_s,

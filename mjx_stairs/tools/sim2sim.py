@@ -331,6 +331,7 @@ def run(onnx_path: str | os.PathLike, course: Course, options: Options = Options
     result = {
         **summarise(records), "course": course.name, "onnx": str(onnx_path),
         "onnx_sha256": contract.raw["onnx"]["sha256"], "robot": str(robot or sw.OUR_ROBOT),
+        "robot_sha256": sw.file_sha256(robot or sw.OUR_ROBOT),
         "physics_dt_s": world.model.opt.timestep, "options": dataclasses.asdict(options),
         "base_velocity": "true base-frame velocity of the base origin (a state estimator's)",
         "wall_s": time.time() - t0, "records": records,

@@ -11,6 +11,7 @@ TERRAIN_GROUP, which the height-map rays alone look at.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +24,12 @@ from mjx_stairs.tools.contract import Contract
 from terrains.boxes import grid_boxes
 
 OUR_ROBOT = Path(__file__).resolve().parents[1] / "sim" / "assets" / "go2_full.xml"
+
+
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes: which robot MJCF a record ran (go2_full.xml's calves
+    changed on 2026-11-29 under the same name)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 TERRAIN_GROUP = 5
 PARTS = ("trunk", "hip", "thigh", "calf", "foot")
 """Robot geoms by part: the base body's (trunk and head), hip, thigh, calf (its non-sphere

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import json
 import re
 import subprocess
@@ -444,6 +445,7 @@ def test_cli_runs_short_episodes_with_every_option(onnx_file, tmp_path, capsys):
     assert r["episodes"] == 2 and len(r["records"]) == 2
     assert r["options"]["latency_ms"] == 20.0 and r["options"]["noise"] and r["options"]["push"]
     assert r["options"]["contact_timeconst"] == 0.01
+    assert r["robot_sha256"] == hashlib.sha256(sw.OUR_ROBOT.read_bytes()).hexdigest()
     for rec in r["records"]:
         assert rec["outcome"] in ("timeout", "fell", "success")
         assert 0 < rec["time_s"] <= 0.6 + 1e-9
