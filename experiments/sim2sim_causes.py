@@ -28,7 +28,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_stairs.sim.geoms import add_calf_chains, collide_like
+from mjx_stairs.sim.geoms import add_calf_chains, add_head, collide_like
 from mjx_stairs.sim.robot import ASSET, JOINT_NAMES, LEGS
 
 ASSETS = ASSET.parent
@@ -115,6 +115,20 @@ def _straight_calves(spec: mujoco.MjSpec) -> None:
     _drop_geoms(spec, CALVES)
 
 
+def _training_trunk(spec: mujoco.MjSpec) -> None:
+    """go2_full.xml's trunk box and head replaced by training's trunk group: go2.xml's four
+    corner spheres and the head sphere of robot.head_collision (sim.geoms.HEAD), colliding as
+    the box did."""
+    train = mujoco.MjSpec.from_file(str(ASSET))
+    for corner in ("fl", "fr", "rl", "rr"):
+        src = train.geom(f"trunk_{corner}")
+        geom = spec.body("base").add_geom(name=f"trunk_{corner}", type=src.type, size=src.size,
+                                          pos=src.pos, density=0.0)
+        collide_like(geom, spec.geom("trunk"))
+    add_head(spec)
+    _drop_geoms(spec, ("trunk", *HEAD))
+
+
 HEAD = ("trunk_head_upper", "trunk_head_lower")
 CALVES = tuple(f"{leg}_calf_col{s}" for leg in LEGS for s in ("", "_lower"))
 VARIANTS = {  # name: (base MJCF, edit, what it changes)
@@ -147,6 +161,11 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "full_straight": ("go2_full.xml", _straight_calves,
                       "each calf as one straight capsule on the knee-foot axis (go2_full.xml's "
                       "calf until 2026-11-29)"),
+    "full_sphere_trunk": ("go2_full.xml", _training_trunk,
+                          "the trunk box and head replaced by training's trunk spheres (four "
+                          "corners and the head sphere of robot.head_collision)"),
+    "no_thigh": ("go2_full.xml", lambda s: _drop_geoms(s, [f"{leg}_thigh_col" for leg in LEGS]),
+                 "no thigh capsules (training's robot has no thigh geoms)"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "

@@ -4,6 +4,7 @@
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,3 +56,24 @@ def test_every_robot_variant_compiles_and_changes_collision_alone(tmp_path):
         for g in geoms:
             assert model.geom_friction[g].tolist() == full.geom_friction[
                 full.geom("FL_calf_col").id].tolist()
+
+
+def test_trunk_and_thigh_variants_change_only_those_geoms(tmp_path):
+    """`full_sphere_trunk` swaps the trunk box and head for training's trunk spheres (go2.xml's
+    corners, robot.head_collision's head) and `no_thigh` drops the thigh capsules; masses,
+    inertias and every other colliding geom stay as in `full`."""
+    import mujoco
+
+    def colliding(model):
+        return {model.geom(g).name for g in range(model.ngeom) if model.geom_contype[g]}
+
+    full = mujoco.MjModel.from_xml_path(str(causes.write_robot("full", tmp_path)))
+    trunk = mujoco.MjModel.from_xml_path(str(causes.write_robot("full_sphere_trunk", tmp_path)))
+    thigh = mujoco.MjModel.from_xml_path(str(causes.write_robot("no_thigh", tmp_path)))
+    for m in (trunk, thigh):
+        assert np.allclose(m.body_mass, full.body_mass)
+        assert np.allclose(m.body_inertia, full.body_inertia)
+    spheres = {f"trunk_{c}" for c in ("fl", "fr", "rl", "rr", "head")}
+    assert colliding(trunk) == colliding(full) - {"trunk", *causes.HEAD} | spheres
+    assert all(trunk.geom_type[trunk.geom(n).id] == mujoco.mjtGeom.mjGEOM_SPHERE for n in spheres)
+    assert colliding(thigh) == colliding(full) - {f"{leg}_thigh_col" for leg in causes.LEGS}
