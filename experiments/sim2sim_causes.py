@@ -166,6 +166,13 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                           "corners and the head sphere of robot.head_collision)"),
     "no_thigh": ("go2_full.xml", lambda s: _drop_geoms(s, [f"{leg}_thigh_col" for leg in LEGS]),
                  "no thigh capsules (training's robot has no thigh geoms)"),
+    "no_hip": ("go2_full.xml", lambda s: _drop_geoms(s, [f"{leg}_hip_col" for leg in LEGS]),
+               "no hip cylinders (training's robot has no hip geoms)"),
+    "full_training_body": ("go2_full.xml", lambda s: (
+        _training_trunk(s), _drop_geoms(s, [f"{leg}_thigh_col" for leg in LEGS]),
+        _training_calves(s)),
+        "training's trunk spheres, no thighs, training's calves with the chain: `calf_chain`'s "
+        "collision but for the hip cylinders kept"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "

@@ -60,8 +60,9 @@ def test_every_robot_variant_compiles_and_changes_collision_alone(tmp_path):
 
 def test_trunk_and_thigh_variants_change_only_those_geoms(tmp_path):
     """`full_sphere_trunk` swaps the trunk box and head for training's trunk spheres (go2.xml's
-    corners, robot.head_collision's head) and `no_thigh` drops the thigh capsules; masses,
-    inertias and every other colliding geom stay as in `full`."""
+    corners, robot.head_collision's head), `no_thigh` drops the thigh capsules, `no_hip` the hip
+    cylinders; masses, inertias and every other colliding geom stay as in `full`;
+    `full_training_body` is all of training's collision but the hips kept."""
     import mujoco
 
     def colliding(model):
@@ -77,3 +78,9 @@ def test_trunk_and_thigh_variants_change_only_those_geoms(tmp_path):
     assert colliding(trunk) == colliding(full) - {"trunk", *causes.HEAD} | spheres
     assert all(trunk.geom_type[trunk.geom(n).id] == mujoco.mjtGeom.mjGEOM_SPHERE for n in spheres)
     assert colliding(thigh) == colliding(full) - {f"{leg}_thigh_col" for leg in causes.LEGS}
+    hips = {f"{leg}_hip_col" for leg in causes.LEGS}
+    no_hip = mujoco.MjModel.from_xml_path(str(causes.write_robot("no_hip", tmp_path)))
+    assert colliding(no_hip) == colliding(full) - hips
+    body = colliding(mujoco.MjModel.from_xml_path(
+        str(causes.write_robot("full_training_body", tmp_path))))
+    assert hips | spheres <= body and not body & {"trunk", "FL_thigh_col", "FL_calf_col"}
