@@ -145,6 +145,9 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "no_head": ("go2_full.xml", lambda s: _drop_geoms(s, HEAD),
                 "no head geoms (training's trunk spheres do not reach the head)"),
     "spheres": ("go2.xml", _as_full, "training's collision spheres, everything else as `full`"),
+    "spheres_head": ("go2.xml", lambda s: (_as_full(s), add_head(s)),
+                     "`spheres` with the head sphere of robot.head_collision (training's robot "
+                     "since 2026-11-27)"),
     "calf_chain": ("go2.xml", lambda s: (_as_full(s), add_calf_chains(s, LEGS)),
                    "`spheres` with the calf chains of robot.calf_collision (sim.geoms)"),
     "no_calf": ("go2_full.xml", lambda s: _drop_geoms(s, CALVES),

@@ -84,3 +84,6 @@ def test_trunk_and_thigh_variants_change_only_those_geoms(tmp_path):
     body = colliding(mujoco.MjModel.from_xml_path(
         str(causes.write_robot("full_training_body", tmp_path))))
     assert hips | spheres <= body and not body & {"trunk", "FL_thigh_col", "FL_calf_col"}
+    with_head = mujoco.MjModel.from_xml_path(str(causes.write_robot("spheres_head", tmp_path)))
+    assert colliding(with_head) == colliding(mujoco.MjModel.from_xml_path(
+        str(causes.write_robot("spheres", tmp_path)))) | {"trunk_head"}
