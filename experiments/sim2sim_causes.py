@@ -57,10 +57,15 @@ def _default_solver(spec: mujoco.MjSpec) -> None:
     spec.option.iterations, spec.option.ls_iterations = 100, 50
 
 
+def _add_like(spec: mujoco.MjSpec, body: str, like: str, name: str, **fields) -> None:
+    """A massless geom `name` on `body`, colliding as geom `like` does."""
+    geom = spec.body(body).add_geom(name=name, density=0.0, **fields)
+    collide_like(geom, spec.geom(like))
+
+
 def _on_calf(spec: mujoco.MjSpec, leg: str, name: str, **fields) -> None:
     """A massless geom `name` on the leg's calf body, colliding as its capsule does."""
-    geom = spec.body(f"{leg}_calf").add_geom(name=name, density=0.0, **fields)
-    collide_like(geom, spec.geom(f"{leg}_calf_col"))
+    _add_like(spec, f"{leg}_calf", f"{leg}_calf_col", name, **fields)
 
 
 def _as_full(spec: mujoco.MjSpec) -> None:
@@ -122,15 +127,16 @@ def _training_trunk(spec: mujoco.MjSpec) -> None:
     train = mujoco.MjSpec.from_file(str(ASSET))
     for corner in ("fl", "fr", "rl", "rr"):
         src = train.geom(f"trunk_{corner}")
-        geom = spec.body("base").add_geom(name=f"trunk_{corner}", type=src.type, size=src.size,
-                                          pos=src.pos, density=0.0)
-        collide_like(geom, spec.geom("trunk"))
+        _add_like(spec, "base", "trunk", f"trunk_{corner}", type=src.type, size=src.size,
+                  pos=src.pos)
     add_head(spec)
     _drop_geoms(spec, ("trunk", *HEAD))
 
 
 HEAD = ("trunk_head_upper", "trunk_head_lower")
 CALVES = tuple(f"{leg}_calf_col{s}" for leg in LEGS for s in ("", "_lower"))
+THIGHS = tuple(f"{leg}_thigh_col" for leg in LEGS)
+HIPS = tuple(f"{leg}_hip_col" for leg in LEGS)
 VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "full": ("go2_full.xml", lambda s: None, "the sim2sim robot as it is (since 2026-11-29 its "
              "calves bowed as the link, sim.geoms.CALF_SHAPE; before, `full_straight`)"),
@@ -167,13 +173,12 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
     "full_sphere_trunk": ("go2_full.xml", _training_trunk,
                           "the trunk box and head replaced by training's trunk spheres (four "
                           "corners and the head sphere of robot.head_collision)"),
-    "no_thigh": ("go2_full.xml", lambda s: _drop_geoms(s, [f"{leg}_thigh_col" for leg in LEGS]),
+    "no_thigh": ("go2_full.xml", lambda s: _drop_geoms(s, THIGHS),
                  "no thigh capsules (training's robot has no thigh geoms)"),
-    "no_hip": ("go2_full.xml", lambda s: _drop_geoms(s, [f"{leg}_hip_col" for leg in LEGS]),
+    "no_hip": ("go2_full.xml", lambda s: _drop_geoms(s, HIPS),
                "no hip cylinders (training's robot has no hip geoms)"),
     "full_training_body": ("go2_full.xml", lambda s: (
-        _training_trunk(s), _drop_geoms(s, [f"{leg}_thigh_col" for leg in LEGS]),
-        _training_calves(s)),
+        _training_trunk(s), _drop_geoms(s, THIGHS), _training_calves(s)),
         "training's trunk spheres, no thighs, training's calves with the chain: `calf_chain`'s "
         "collision but for the hip cylinders kept"),
     "gt_robot": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
