@@ -14,7 +14,9 @@ per (variant, cell) under OUT/<variant>/ (skipped when there: a killed run resum
 OUT/table.md: success, falls and step-edge touches per variant and cell, and each variant's
 paired change against `full` (starts gained minus lost).
 
-Cells: up6 / down4 ... = U-shaped test level, direction (the family with --family).
+Cells: up6 / down4 ... = U-shaped test level, direction (the family with --family). A variant
+name with the suffix _d01 is that variant at joint damping 0.1 (e.g. gt_robot_head_d01); --base
+names the variant that the paired changes are counted against (default full).
 """
 
 from __future__ import annotations
@@ -185,14 +187,34 @@ VARIANTS = {  # name: (base MJCF, edit, what it changes)
                                        _default_solver(s)),
                  "the ground truth's robot (training's MJCF: spheres, no friction loss), damping 2 "
                  "implicit, the solver converged"),
+    "gt_robot_head": ("go2.xml", lambda s: (_joints(s, damping=2.0), _integrator(s, "euler"),
+                                            _default_solver(s), add_head(s)),
+                      "`gt_robot` with the head sphere of robot.head_collision: training's and "
+                      "the MJX evaluation's robot since 2026-11-27"),
     "gt_robot_explicit": ("go2.xml", lambda s: (_joints(s, damping=2.0), _default_solver(s)),
                           "the same with the damping explicit (training's integrator)"),
 }
 
 
+D01 = "_d01"
+"""A variant name's suffix: the variant with every joint's damping then set to 0.1, the
+evaluation physics' (the MJCF's) damping, e.g. `gt_robot_head_d01`."""
+
+
+def lookup(variant: str) -> tuple[str, object, str]:
+    """VARIANTS[variant], or for `<known>_d01` that variant at joint damping 0.1."""
+    if variant in VARIANTS:
+        return VARIANTS[variant]
+    if variant.endswith(D01) and variant[:-len(D01)] in VARIANTS:
+        base, edit, what = VARIANTS[variant[:-len(D01)]]
+        return base, lambda s: (edit(s), _joints(s, damping=0.1)), f"{what}; joint damping 0.1"
+    raise SystemExit(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)} (each also "
+                     f"with the suffix {D01}: joint damping 0.1)")
+
+
 def write_robot(variant: str, folder: Path) -> Path:
     """OUT/robots/<variant>.xml: the variant's MJCF."""
-    base, edit, _ = VARIANTS[variant]
+    base, edit, _ = lookup(variant)
     spec = mujoco.MjSpec.from_file(str(ASSETS / base))
     edit(spec)
     spec.compile()  # fails here, not in a worker
@@ -242,7 +264,7 @@ def _job(args) -> str:
            f"{r['wall_s']:.0f} s"
 
 
-def table(folder: Path, variants: list[str], cells: list[str]) -> str:
+def table(folder: Path, variants: list[str], cells: list[str], base: str = "full") -> str:
     def load(v, c):
         p = folder / v / f"{c}.json"
         return json.loads(p.read_text()) if p.is_file() else None
@@ -252,19 +274,19 @@ def table(folder: Path, variants: list[str], cells: list[str]) -> str:
     for v in variants:
         row = []
         for c in cells:
-            d, ref = load(v, c), load("full", c)
+            d, ref = load(v, c), load(base, c)
             if d is None:
                 row.append("")
                 continue
             s = f"{100 * d['success']:.0f} ({100 * d['fell']:.0f})"
-            if ref is not None and v != "full" and len(ref["records"]) == len(d["records"]):
+            if ref is not None and v != base and len(ref["records"]) == len(d["records"]):
                 a = np.array([r["success"] for r in ref["records"]])
                 b = np.array([r["success"] for r in d["records"]])
                 s += f" +{int((b & ~a).sum())}/-{int((a & ~b).sum())}"
             e = d["edge_contacts_per_episode"]
             s += f"; trunk {e['trunk']:.1f}, calf {e['calf']:.1f}"
             row.append(s)
-        rows.append(f"| {v} | {VARIANTS[v][2]} | " + " | ".join(row) + " |")
+        rows.append(f"| {v} | {lookup(v)[2]} | " + " | ".join(row) + " |")
     return "\n".join(rows) + "\n"
 
 
@@ -284,11 +306,14 @@ def main() -> None:
                     help="every geom's contact solref time constant (s; 0: the MJCF's own), "
                          "0.01 as the evaluation physics since 2026-11-28")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--base", default="full",
+                    help="the variant that the others' paired changes are counted against")
     a = ap.parse_args()
     variants, cells = a.variants.split(","), a.cells.split(",")
-    for v in variants:
-        if v not in VARIANTS:
-            raise SystemExit(f"unknown variant {v!r}; known: {', '.join(VARIANTS)}")
+    for v in (*variants, a.base):
+        lookup(v)
+    if a.base not in variants:
+        raise SystemExit(f"--base {a.base!r} is not one of --variants")
     for c in cells:
         check_cell(a.family, c)
     jobs = []
@@ -303,14 +328,14 @@ def main() -> None:
     with ProcessPoolExecutor(a.workers) as pool:
         for line in pool.map(_job, jobs):
             print(line, flush=True)
-    text = table(a.out, variants, cells)
+    text = table(a.out, variants, cells, a.base)
     where = "the code suite" if a.family == "code" else f"{a.family} test levels"
     contact = f"{a.contact_timeconst:g} s" if a.contact_timeconst else "the MJCF's"
     note = (f"\nsuccess % (falls %) of {a.episodes} episodes per cell ({a.episode_s:g} s), "
             f"{where}, sim2sim's starts (seed 0), latency {a.latency_ms:g} ms, contact time "
             f"constant {contact}; +gained/-lost: "
-            "starts that succeed with the variant and not with `full`, and the reverse; trunk, "
-            f"calf: step-edge touches per episode. Policy: {a.onnx}.\n")
+            f"starts that succeed with the variant and not with `{a.base}`, and the reverse; "
+            f"trunk, calf: step-edge touches per episode. Policy: {a.onnx}.\n")
     (a.out / "table.md").write_text(text + note)
     print(text + note)
 

@@ -87,3 +87,25 @@ def test_trunk_and_thigh_variants_change_only_those_geoms(tmp_path):
     with_head = mujoco.MjModel.from_xml_path(str(causes.write_robot("spheres_head", tmp_path)))
     assert colliding(with_head) == colliding(mujoco.MjModel.from_xml_path(
         str(causes.write_robot("spheres", tmp_path)))) | {"trunk_head"}
+
+
+def test_d01_suffix_is_the_variant_at_damping_01_and_nothing_else(tmp_path):
+    """`<variant>_d01` is that variant with every joint's damping 0.1 (the evaluation physics'),
+    its geoms, integrator and friction loss unchanged; `gt_robot_head` is `gt_robot` with the
+    head sphere; an unknown name or suffix is refused with the known names."""
+    import mujoco
+
+    def load(v):
+        return mujoco.MjModel.from_xml_path(str(causes.write_robot(v, tmp_path)))
+
+    for variant in ("full", "gt_robot_head", "spheres_head"):
+        plain, d01 = load(variant), load(variant + causes.D01)
+        assert np.allclose(d01.dof_damping[6:], 0.1) and not np.allclose(plain.dof_damping[6:], 0.1)
+        assert plain.ngeom == d01.ngeom and plain.opt.integrator == d01.opt.integrator
+        assert np.array_equal(plain.dof_frictionloss, d01.dof_frictionloss)
+    gt, head = load("gt_robot"), load("gt_robot_head")
+    assert head.ngeom == gt.ngeom + 1
+    assert head.geom("trunk_head").type == mujoco.mjtGeom.mjGEOM_SPHERE
+    for bad in ("full_d02", "nothing_d01"):
+        with pytest.raises(SystemExit, match=bad):
+            causes.lookup(bad)
