@@ -56,6 +56,22 @@ class HeightMapConfig:
     spacing: float = 0.2  # m between points (21 x 0.2 -> 4 m x 4 m)
     offset: float = 0.4  # subtracted from base z - terrain z
     clip: float = 3.0  # |value| clip (m)
+    # "Nothing behind a wall" (issue 24): with occlusion_samples > 0 a map point reads the
+    # highest terrain between the base and it that stands above the sensor (base z +
+    # sensor_height), where that is higher than its own: a wall hides what lies behind it, as
+    # an elevation map built from the robot's own sensors has nothing past it. Read at
+    # occlusion_samples - 1 points evenly along the segment from the base (<= 0.09 m apart at
+    # 32 on the 4 m map; our walls are >= 0.2 m thick). 0: off (every policy before 2026-11-29,
+    # whose maps read the floor behind the U tile's divider as a 0.8 m drop).
+    occlusion_samples: int = 0
+    sensor_height: float = 0.1  # m above the base
+
+    def __post_init__(self):
+        _require("env.height_map", [
+            ("occlusion_samples", self.occlusion_samples,
+             self.occlusion_samples == 0 or self.occlusion_samples >= 2, "0 (off) or >= 2"),
+            ("sensor_height", self.sensor_height, self.sensor_height >= 0, ">= 0 m"),
+        ])
 
 
 @dataclasses.dataclass(frozen=True)

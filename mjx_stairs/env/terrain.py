@@ -50,4 +50,14 @@ class Terrain:
         py = pos[1] + s * self._map_xy[:, 0] + c * self._map_xy[:, 1]
         px, py = jnp.clip(px, lo[0], hi[0]), jnp.clip(py, lo[1], hi[1])
         h = self.height(px, py)
+        if hm.occlusion_samples > 0:
+            h = jnp.maximum(h, self._occluder(pos, px, py))
         return jnp.clip(pos[2] - h - hm.offset, -hm.clip, hm.clip)
+
+    def _occluder(self, pos: jnp.ndarray, px: jnp.ndarray, py: jnp.ndarray) -> jnp.ndarray:
+        """[P] the highest terrain above the sensor on the segment from the base to each map
+        point (HeightMapConfig.occlusion_samples), -inf where none is."""
+        hm = self._hm
+        s = jnp.arange(1, hm.occlusion_samples, dtype=jnp.float32) / hm.occlusion_samples
+        z = self.height(pos[0] + s * (px[:, None] - pos[0]), pos[1] + s * (py[:, None] - pos[1]))
+        return jnp.where(z > pos[2] + hm.sensor_height, z, -jnp.inf).max(-1)

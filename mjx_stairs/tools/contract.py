@@ -56,6 +56,8 @@ class Contract:
     lookahead: float
     evaluation: dict[str, Any]
     history: int = 0  # policy steps of joint positions and actions the observation keeps
+    hm_occlusion: int = 0  # height_map.occlusion.samples (0: none)
+    hm_sensor_height: float = 0.0  # m, height_map.occlusion.sensor_height_m
     heading: str = "ahead"  # the waypoint's yaw: the route's heading at it ("ahead"), at the
     # robot's projection ("here"), or from the projection to the waypoint ("chord")
 
@@ -135,6 +137,8 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         hm_xy=np.stack([gx.ravel(), gy.ravel()], -1), goal_mode=str(goal["mode"]),
         lookahead=float(goal["lookahead_m"] or 0.0), evaluation=dict(raw.get("evaluation", {})),
         history=history, heading=_heading(goal, w),
+        hm_occlusion=int((hm.get("occlusion") or {}).get("samples", 0)),
+        hm_sensor_height=float((hm.get("occlusion") or {}).get("sensor_height_m", 0.0)),
     )
 
 
@@ -231,6 +235,21 @@ def map_points(c: Contract, pos: np.ndarray, yaw: float) -> np.ndarray:
     cs, sn = np.cos(yaw), np.sin(yaw)
     x, y = c.hm_xy[:, 0], c.hm_xy[:, 1]
     return np.stack([pos[0] + cs * x - sn * y, pos[1] + sn * x + cs * y], -1)
+
+
+def occlusion_points(c: Contract, pos: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """[P, K - 1, 2] world xy where the sidecar's occlusion rule reads the elevation map: K - 1
+    points evenly between the base `pos` and each map point of `points` [P, 2]."""
+    s = np.arange(1, c.hm_occlusion, dtype=np.float64)[None, :, None] / c.hm_occlusion
+    return pos[:2] + s * (np.asarray(points, np.float64)[:, None, :] - pos[:2])
+
+
+def occlude(c: Contract, pos: np.ndarray, terrain_z: np.ndarray,
+            sample_z: np.ndarray) -> np.ndarray:
+    """[P] the map points' terrain_z as the sidecar's occlusion rule has it: raised to the
+    highest of their samples' heights `sample_z` [P, K - 1] that stand above the sensor."""
+    seen = np.where(sample_z > pos[2] + c.hm_sensor_height, sample_z, -np.inf).max(-1)
+    return np.maximum(np.asarray(terrain_z, np.float64), seen)
 
 
 def wrap(a: float) -> float:

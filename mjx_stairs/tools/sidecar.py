@@ -98,6 +98,13 @@ def _height_map(cfg: EnvConfig) -> dict[str, Any]:
         "sampling": "terrain_z = the highest terrain surface at the point (a vertical ray cast "
                     "down from above everything; the robot itself is not terrain)",
         "missing_value_m": hm.clip,
+        "occlusion": None if not hm.occlusion_samples else {
+            "samples": hm.occlusion_samples, "sensor_height_m": hm.sensor_height,
+            "rule": "a point's terrain_z is raised to the highest terrain z among the samples "
+                    "base_xy + (k / samples) * (point_xy - base_xy), k = 1 .. samples - 1, that "
+                    "stand above base_z + sensor_height_m (a wall hides what lies behind it); "
+                    "the samples are read from the elevation map, bilinear between its cells",
+        },
         "missing": "a point without data (no terrain, or the elevation map has no cell there: "
                    "terrain_z NaN) reads missing_value_m (+clip_m)",
     }

@@ -140,12 +140,16 @@ class Sim:
         pos, rot = self.base()
         v = d.qvel[w.base_dof:w.base_dof + 6]  # world linear, base-frame angular
         xy = ct.map_points(c, pos, ct.base_yaw(rot))
+        terrain_z = sw.terrain_z(w, xy)
+        if c.hm_occlusion:  # the sidecar's rule: nothing behind a wall
+            terrain_z = ct.occlude(c, pos, terrain_z,
+                                   sw.elevation_z(w, ct.occlusion_points(c, pos, xy)))
         return ct.Measurement(
             joint_pos=d.qpos[w.qpos_adr].copy(), joint_vel=d.qvel[w.dof_adr].copy(),
             ang_vel=v[3:6].copy(), base_rot=rot, base_pos=pos, lin_vel=rot.T @ v[:3],
             last_action=self.last_action,
             target=ct.goal_target(c, pos[:2], self.course.goal, self.course.route),
-            terrain_z=sw.terrain_z(w, xy), joint_pos_history=self.history.joint_pos,
+            terrain_z=terrain_z, joint_pos_history=self.history.joint_pos,
             action_history=self.history.actions)
 
     def observe(self) -> np.ndarray:

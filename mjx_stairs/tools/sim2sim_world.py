@@ -63,6 +63,8 @@ class World:
     resolution: float
     ray_top: float  # m, rays start here (above everything)
     substeps: int  # physics steps per control step
+    elevation: np.ndarray | None = None  # [ny, nx] m: the elevation map at the grid points,
+    # ray cast as first asked for (NaN: not yet), for the sidecar's occlusion rule
 
 
 def _load_spec(path: str | os.PathLike | None) -> mujoco.MjSpec:
@@ -166,7 +168,8 @@ def _world(model: mujoco.MjModel, contract: Contract, grid: np.ndarray, origin: 
         qpos_adr=qpos, dof_adr=dof, actuator=act, gear=gear,
         part=_parts(model, terrain), terrain=terrain, edge=edge_mask(grid, resolution),
         grid_origin=np.asarray(origin, np.float64), resolution=float(resolution),
-        ray_top=float(np.max(grid)) + 2.0, substeps=int(round(ratio)))
+        ray_top=float(np.max(grid)) + 2.0, substeps=int(round(ratio)),
+        elevation=np.full(grid.shape, np.nan))
 
 
 def _joints_and_motors(model: mujoco.MjModel, names: tuple[str, ...], source):
@@ -244,6 +247,27 @@ def terrain_z(w: World, xy: np.ndarray) -> np.ndarray:
         d = mujoco.mj_ray(w.model, w.data, pnt, down, groups, 1, -1, hit)
         out[i] = w.ray_top - d if d >= 0 else -np.inf
     return out
+
+
+def elevation_z(w: World, xy: np.ndarray) -> np.ndarray:
+    """[...] the elevation map's height at world points xy [..., 2]: bilinear between its grid
+    points (terrain_z ray casts at them, made once per point), clamped to the grid's edge; the
+    training env reads its heightfield the same way."""
+    ny, nx = w.elevation.shape
+    f = (np.asarray(xy, np.float64) - w.grid_origin) / w.resolution
+    fx, fy = np.clip(f[..., 0], 0.0, nx - 1.0), np.clip(f[..., 1], 0.0, ny - 1.0)
+    ix = np.clip(np.floor(fx).astype(np.int64), 0, nx - 2)
+    iy = np.clip(np.floor(fy).astype(np.int64), 0, ny - 2)
+    corners = [(iy, ix), (iy, ix + 1), (iy + 1, ix), (iy + 1, ix + 1)]
+    need = np.unique(np.concatenate([np.stack([a.ravel(), b.ravel()], -1) for a, b in corners]),
+                     axis=0)
+    need = need[np.isnan(w.elevation[need[:, 0], need[:, 1]])]
+    if len(need):
+        pts = w.grid_origin + need[:, ::-1] * w.resolution
+        w.elevation[need[:, 0], need[:, 1]] = terrain_z(w, pts)
+    h00, h01, h10, h11 = (w.elevation[a, b] for a, b in corners)
+    tx, ty = fx - ix, fy - iy
+    return (h00 * (1 - tx) + h01 * tx) * (1 - ty) + (h10 * (1 - tx) + h11 * tx) * ty
 
 
 def touching_edges(w: World) -> np.ndarray:

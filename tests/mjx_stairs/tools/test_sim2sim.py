@@ -39,9 +39,10 @@ ROOT = Path(__file__).resolve().parents[3]
 STAGE2 = ROOT / "experiments" / "results" / "stage2_u" / "policy.npz"
 
 
-def _export(tmp, mode: str, history: int = 0) -> tuple[Path, policy_lib.Policy]:
-    """A policy of the real architecture (goal `mode`, `history` steps of observation history)
-    exported to ONNX + sidecar."""
+def _export(tmp, mode: str, history: int = 0,
+            occlusion: int = 0) -> tuple[Path, policy_lib.Policy]:
+    """A policy of the real architecture (goal `mode`, `history` steps of observation history,
+    `occlusion` samples of the height map's wall rule) exported to ONNX + sidecar."""
     state, cfg = _policy_state(history=history)
     path = tmp / "policy.npz"
     policy_lib.save_policy(path, state.params, state.normalizer, 7, cfg,
@@ -49,6 +50,7 @@ def _export(tmp, mode: str, history: int = 0) -> tuple[Path, policy_lib.Policy]:
     policy = policy_lib.load_policy(path)
     meta = copy.deepcopy(policy.metadata)
     meta["config"]["env"].update(goal_mode=mode, waypoint_lookahead_m=1.0, obs_history=history)
+    meta["config"]["env"]["height_map"]["occlusion_samples"] = occlusion
     policy = policy._replace(metadata=meta)
     export.export_policy(policy, tmp / "policy.onnx")
     return tmp / "policy.onnx", policy
@@ -59,11 +61,14 @@ def onnx_file(tmp_path_factory):
     return _export(tmp_path_factory.mktemp("onnx"), "waypoint")[0]
 
 
-@pytest.fixture(scope="module", params=["final", "waypoint"])
+@pytest.fixture(scope="module", params=["final", "waypoint", "occluded"])
 def contract_case(request, tmp_path_factory):
     """Random robot states on a U-shaped staircase (a heightfield): the observation of the
-    training env and of sim2sim for each, and the policy."""
-    onnx_path, policy = _export(tmp_path_factory.mktemp(request.param), request.param)
+    training env and of sim2sim for each, and the policy ("occluded": the waypoint goal with
+    the height map's wall rule, height_map.occlusion_samples 32)."""
+    mode = "final" if request.param == "final" else "waypoint"
+    onnx_path, policy = _export(tmp_path_factory.mktemp(request.param), mode,
+                                occlusion=32 if request.param == "occluded" else 0)
     cfg = evaluation_config(env_config_from(policy.metadata["config"]["env"]))
     atlas = terrains.build_cell_atlas([("u_shaped", "test", 3)], 1, resolution=0.05,
                                       tile_size=10.0, border=1.0)
@@ -76,7 +81,7 @@ def contract_case(request, tmp_path_factory):
     sim.reset(*atlas.spawn[0][[0, 1, 5]])
     observe = jax.jit(lambda q, v, i: env.observe(q, v, i)["state"])
     rng = np.random.default_rng(1)
-    ours, theirs, points, rays = [], [], [], []
+    ours, theirs, points, rays, seen = [], [], [], [], []
     for _ in range(16):  # inside the tile, 3 m from its edges: the map never leaves it
         xy = atlas.origin[0] + rng.uniform(3.0, 7.0, 2)
         floor = float(env.terrain_height(jnp.float32(xy[0]), jnp.float32(xy[1])))
@@ -91,13 +96,14 @@ def contract_case(request, tmp_path_factory):
         m = sim.measure()
         ours.append(ct.observation(c, m))
         points.append(ct.map_points(c, m.base_pos, ct.base_yaw(m.base_rot)))
-        rays.append(m.terrain_z)
+        rays.append(sw.terrain_z(world, points[-1]))  # the plain ray casts
+        seen.append(m.terrain_z)  # what the observation used (the wall rule, where on)
         info = {"tile": jnp.int32(0), "last_action": jnp.asarray(last, jnp.float32)}
         theirs.append(np.asarray(observe(jnp.asarray(qpos, jnp.float32),
                                          jnp.asarray(qvel, jnp.float32), info)))
-    return dict(mode=request.param, onnx=onnx_path, policy=policy, contract=c, atlas=atlas,
+    return dict(mode=mode, onnx=onnx_path, policy=policy, contract=c, atlas=atlas,
                 ours=np.array(ours), theirs=np.array(theirs), points=np.array(points),
-                rays=np.array(rays))
+                rays=np.array(rays), seen=np.array(seen))
 
 
 def test_vector_observation_equals_the_training_env(contract_case):
@@ -131,6 +137,22 @@ def test_height_map_equals_the_training_env_where_both_are_exact(contract_case):
     hi = np.maximum(np.maximum(h00, h01), np.maximum(h10, h11))
     assert np.all((ray >= lo - 1e-4) & (ray <= hi + 1e-4))
     assert np.ptp(theirs) > 0.5  # the map sees the stairs
+
+
+def test_the_wall_rule_raises_what_lies_behind_a_wall_alone(contract_case):
+    """With the sidecar's occlusion rule a map point reads the highest terrain above the sensor
+    between the base and it: behind the U tile's divider and outer walls (1.6 m) the map reads
+    the wall, elsewhere the plain ray cast; without the rule, the ray cast everywhere."""
+    rays, seen = contract_case["rays"].ravel(), contract_case["seen"].ravel()
+    rule = contract_case["contract"].raw["height_map"]["occlusion"]
+    assert (rule or {}).get("samples") == contract_case["contract"].hm_occlusion
+    if not contract_case["contract"].hm_occlusion:
+        np.testing.assert_array_equal(seen, rays)
+        return
+    raised = seen > rays + 1e-6
+    assert 0.02 < raised.mean() < 0.6
+    assert np.all(seen[raised] > 1.0)  # a wall's height, not a step's
+    np.testing.assert_allclose(seen[~raised], rays[~raised], rtol=0, atol=1e-9)
 
 
 def test_onnx_action_equals_the_jax_policy(contract_case):
