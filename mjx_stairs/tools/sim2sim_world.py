@@ -259,13 +259,14 @@ def elevation_z(w: World, xy: np.ndarray) -> np.ndarray:
     ix = np.clip(np.floor(fx).astype(np.int64), 0, nx - 2)
     iy = np.clip(np.floor(fy).astype(np.int64), 0, ny - 2)
     corners = [(iy, ix), (iy, ix + 1), (iy + 1, ix), (iy + 1, ix + 1)]
-    need = np.unique(np.concatenate([np.stack([a.ravel(), b.ravel()], -1) for a, b in corners]),
-                     axis=0)
-    need = need[np.isnan(w.elevation[need[:, 0], need[:, 1]])]
-    if len(need):
+    h = [w.elevation[a, b] for a, b in corners]
+    if any(np.isnan(v).any() for v in h):  # cast the grid points not cast yet, once each
+        need = np.unique(np.concatenate([np.stack([a[np.isnan(v)], b[np.isnan(v)]], -1)
+                                         for (a, b), v in zip(corners, h, strict=True)]), axis=0)
         pts = w.grid_origin + need[:, ::-1] * w.resolution
         w.elevation[need[:, 0], need[:, 1]] = terrain_z(w, pts)
-    h00, h01, h10, h11 = (w.elevation[a, b] for a, b in corners)
+        h = [w.elevation[a, b] for a, b in corners]
+    h00, h01, h10, h11 = h
     tx, ty = fx - ix, fy - iy
     return (h00 * (1 - tx) + h01 * tx) * (1 - ty) + (h10 * (1 - tx) + h11 * tx) * ty
 

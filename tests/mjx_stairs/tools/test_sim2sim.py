@@ -145,7 +145,7 @@ def test_the_wall_rule_raises_what_lies_behind_a_wall_alone(contract_case):
     the wall, elsewhere the plain ray cast; without the rule, the ray cast everywhere."""
     rays, seen = contract_case["rays"].ravel(), contract_case["seen"].ravel()
     rule = contract_case["contract"].raw["height_map"]["occlusion"]
-    assert (rule or {}).get("samples") == contract_case["contract"].hm_occlusion
+    assert (rule or {}).get("samples", 0) == contract_case["contract"].hm_occlusion
     if not contract_case["contract"].hm_occlusion:
         np.testing.assert_array_equal(seen, rays)
         return
