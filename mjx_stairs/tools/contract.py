@@ -114,6 +114,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
     hm, joints, pd = _need(raw, "height_map", w), _need(raw, "joints", w), _need(raw, "pd", w)
     act, rates, goal = _need(raw, "action", w), _need(raw, "rates", w), _need(raw, "goal", w)
     n = int(hm["size"][0])
+    occlusion = hm.get("occlusion") or {}  # the wall rule; absent or null: none
     gx, gy = np.meshgrid(np.asarray(hm["x_m"]), np.asarray(hm["y_m"]), indexing="xy")
     if slices["height_map"].stop - slices["height_map"].start != n * n:
         raise ContractError(f"{w}: height_map term of the wrong size for a {n} x {n} grid")
@@ -137,8 +138,8 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         hm_xy=np.stack([gx.ravel(), gy.ravel()], -1), goal_mode=str(goal["mode"]),
         lookahead=float(goal["lookahead_m"] or 0.0), evaluation=dict(raw.get("evaluation", {})),
         history=history, heading=_heading(goal, w),
-        hm_occlusion=int((hm.get("occlusion") or {}).get("samples", 0)),
-        hm_sensor_height=float((hm.get("occlusion") or {}).get("sensor_height_m", 0.0)),
+        hm_occlusion=int(occlusion.get("samples", 0)),
+        hm_sensor_height=float(occlusion.get("sensor_height_m", 0.0)),
     )
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from mjx_stairs.sim import solref
 from mjx_stairs.tools.contract import Contract
+from terrains import sample_heights
 from terrains.boxes import grid_boxes
 
 OUR_ROBOT = Path(__file__).resolve().parents[1] / "sim" / "assets" / "go2_full.xml"
@@ -251,24 +252,19 @@ def terrain_z(w: World, xy: np.ndarray) -> np.ndarray:
 
 def elevation_z(w: World, xy: np.ndarray) -> np.ndarray:
     """[...] the elevation map's height at world points xy [..., 2]: bilinear between its grid
-    points (terrain_z ray casts at them, made once per point), clamped to the grid's edge; the
-    training env reads its heightfield the same way."""
+    points (terrains.sample_heights, as the training env reads its heightfield), clamped to the
+    grid's edge; each grid point is a terrain_z ray cast, made once, when first needed."""
+    q = np.asarray(xy, np.float64) - w.grid_origin
     ny, nx = w.elevation.shape
-    f = (np.asarray(xy, np.float64) - w.grid_origin) / w.resolution
-    fx, fy = np.clip(f[..., 0], 0.0, nx - 1.0), np.clip(f[..., 1], 0.0, ny - 1.0)
-    ix = np.clip(np.floor(fx).astype(np.int64), 0, nx - 2)
-    iy = np.clip(np.floor(fy).astype(np.int64), 0, ny - 2)
-    corners = [(iy, ix), (iy, ix + 1), (iy + 1, ix), (iy + 1, ix + 1)]
-    h = [w.elevation[a, b] for a, b in corners]
-    if any(np.isnan(v).any() for v in h):  # cast the grid points not cast yet, once each
-        need = np.unique(np.concatenate([np.stack([a[np.isnan(v)], b[np.isnan(v)]], -1)
-                                         for (a, b), v in zip(corners, h, strict=True)]), axis=0)
-        pts = w.grid_origin + need[:, ::-1] * w.resolution
-        w.elevation[need[:, 0], need[:, 1]] = terrain_z(w, pts)
-        h = [w.elevation[a, b] for a, b in corners]
-    h00, h01, h10, h11 = h
-    tx, ty = fx - ix, fy - iy
-    return (h00 * (1 - tx) + h01 * tx) * (1 - ty) + (h10 * (1 - tx) + h11 * tx) * ty
+    ix = np.clip(np.floor(q[..., 0] / w.resolution).astype(np.int64), 0, nx - 2).ravel()
+    iy = np.clip(np.floor(q[..., 1] / w.resolution).astype(np.int64), 0, ny - 2).ravel()
+    rows, cols = np.concatenate([iy, iy, iy + 1, iy + 1]), np.concatenate([ix, ix + 1, ix, ix + 1])
+    missing = np.isnan(w.elevation[rows, cols])
+    if missing.any():
+        need = np.unique(np.stack([rows[missing], cols[missing]], -1), axis=0)
+        w.elevation[need[:, 0], need[:, 1]] = terrain_z(
+            w, w.grid_origin + need[:, ::-1] * w.resolution)
+    return sample_heights(w.elevation, w.resolution, q[..., 0], q[..., 1])
 
 
 def touching_edges(w: World) -> np.ndarray:
