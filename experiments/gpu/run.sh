@@ -463,8 +463,9 @@ run_step() {
     # stage2_u", then "--steps suite,mesh --policies stage2_u_lean,stage1"; CODE_MESH (a+b):
     # the mesh step for those policies (NAME=FILE as CODE_POLICIES)
     code-suite)
-      args=(${CODE_SUITE_ARGS:-})  # CODE_POLICIES (a+b, NAME=FILE for an uncommitted one; a
-      # gpuN: token cannot hold a comma): the suite step for those policies only
+      args=${CODE_SUITE_ARGS:-}; args=(${args//+/ })  # CODE_SUITE_ARGS: a+b, as a gpuN:
+      # token holds no space (unsplit, --env+k=v reached argparse whole, 2026-11-29);
+      # CODE_POLICIES (a+b, NAME=FILE for an uncommitted one; a gpuN: token cannot hold a comma): the suite step for those policies only
       # both: one --steps suite,mesh (a second --steps flag replaced the first: 2026-11-27's
       # CODE_POLICIES=generalist_robot,CODE_MESH=generalist_robot ran the mesh step only)
       steps=(); [ -n "${CODE_POLICIES:-}" ] && steps+=(suite); [ -n "${CODE_MESH:-}" ] && steps+=(mesh)
