@@ -217,7 +217,8 @@ def cmd_play(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from mjx_stairs.tools import export
 
-    return export.export_command(args.checkpoint, args.onnx, check=args.verify)
+    return export.export_command(args.checkpoint, args.onnx, check=args.verify,
+                                 observation=args.observation)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -350,6 +351,10 @@ def _add_tools(sub) -> None:
     ex.add_argument(
         "--no-verify", dest="verify", action="store_false", help="skip the onnxruntime vs JAX check"
     )
+    ex.add_argument("--observation", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="what the robot's perception gives beyond training, listed in the "
+                         "sidecar: height_map.occlusion_samples (the wall rule), "
+                         "height_map.sensor_height")
     ex.set_defaults(fn=cmd_export)
     sim2sim_cli.add_parser(sub)
 

@@ -24,13 +24,21 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import jax
 import numpy as np
 
 from mjx_stairs import atomic
-from mjx_stairs.rl.policy import Policy, load_policy, normaliser_constants, policy_action
+from mjx_stairs.config import ConfigError, to_dict
+from mjx_stairs.env.config import env_config_from
+from mjx_stairs.rl.policy import (
+    Policy,
+    load_policy,
+    normaliser_constants,
+    policy_action,
+    saved_config,
+)
 from mjx_stairs.tools import sidecar as sidecar_lib
 
 OPSET = sidecar_lib.OPSET
@@ -217,15 +225,43 @@ def verify(policy: Policy, onnx_path: str | os.PathLike, n: int = 64,
     return diff / max(1.0, float(np.max(np.abs(want))))
 
 
-def export_command(checkpoint: str, onnx_path: str, check: bool = False) -> int:
-    """`mjx-stairs export`: write the graph and sidecar, optionally check them against JAX on
-    64 random observations; exit status 0, 1 (the graph disagrees) or 2 (bad input)."""
+# What a robot's perception gives the policy without changing the network's input: settings of
+# the observation that `export --observation` may change (the wall rule: docs/deploy.md,
+# "Nothing behind a wall"; docs/results.md 8x: a policy trained without it does better with it).
+OBSERVATION_KEYS = ("height_map.occlusion_samples", "height_map.sensor_height")
+
+
+def with_observation(policy: Policy, overrides: Sequence[str]) -> Policy:
+    """The policy with its saved env config's observation settings changed (KEY=VALUE, KEY in
+    OBSERVATION_KEYS), the change listed in its metadata (`observation_overrides`) so that the
+    sidecar says it was not trained with it; a bad item is an ExportError."""
+    if not overrides:
+        return policy
+    for item in overrides:
+        if item.partition("=")[0].strip() not in OBSERVATION_KEYS or "=" not in item:
+            raise ExportError(f"--observation '{item}': expected KEY=VALUE with KEY one of "
+                              f"{', '.join(OBSERVATION_KEYS)}")
+    try:
+        cfg = env_config_from(saved_config(policy, "env"), overrides)
+    except ConfigError as e:
+        raise ExportError(f"--observation: {e}") from None
+    meta = dict(policy.metadata)
+    meta["config"] = {**meta.get("config", {}), "env": to_dict(cfg)}
+    meta["observation_overrides"] = [*meta.get("observation_overrides", []), *overrides]
+    return policy._replace(metadata=meta)
+
+
+def export_command(checkpoint: str, onnx_path: str, check: bool = False,
+                   observation: Sequence[str] = ()) -> int:
+    """`mjx-stairs export`: write the graph and sidecar (with the `observation` overrides, see
+    with_observation), optionally check them against JAX on 64 random observations; exit status
+    0, 1 (the graph disagrees) or 2 (bad input)."""
     import sys
 
     from mjx_stairs.rl.policy import load_policy
 
     try:
-        policy = load_policy(checkpoint)
+        policy = with_observation(load_policy(checkpoint), observation)
         export_policy(policy, onnx_path)
         print(f"wrote {onnx_path} and {sidecar_path(onnx_path)}", flush=True)
         if check:

@@ -281,5 +281,6 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
         "training": _training(cfg),
         "versions": versions(),
         "policy": {"iteration": meta.get("iteration"), "env_steps": meta.get("env_steps"),
-                   "network": meta.get("network"), "config": meta.get("config")},
+                   "network": meta.get("network"), "config": meta.get("config"),
+                   "observation_overrides": meta.get("observation_overrides", [])},
     }

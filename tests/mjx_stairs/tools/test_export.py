@@ -340,3 +340,43 @@ def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
     assert t["joint_damping_integration"] == "explicit" and t["head_collision"] is False
     assert t["calf_collision"] is False
     assert t["contact_timeconst_s"] == 0.02  # go2.xml's solref (env.robot.contact_timeconst 0)
+
+
+def test_cli_export_with_the_wall_rule_writes_it_into_the_sidecar(policy_file, tmp_path):
+    """`--observation`: the sidecar's height map carries the rule and says the policy did not
+    train with it; the graph is the same."""
+    plain, ruled = tmp_path / "plain.onnx", tmp_path / "ruled.onnx"
+    assert cli.main(["export", "--checkpoint", str(policy_file), "--onnx", str(plain),
+                     "--no-verify"]) == 0
+    assert cli.main(["export", "--checkpoint", str(policy_file), "--onnx", str(ruled),
+                     "--no-verify", "--observation", "height_map.occlusion_samples=16",
+                     "height_map.sensor_height=0.05"]) == 0
+    side0, side = (json.loads((tmp_path / f"{n}.onnx.json").read_text())
+                   for n in ("plain", "ruled"))
+    assert side0["height_map"]["occlusion"] is None
+    assert side0["policy"]["observation_overrides"] == []
+    occ = side["height_map"]["occlusion"]
+    assert (occ["samples"], occ["sensor_height_m"]) == (16, 0.05)
+    assert side["policy"]["observation_overrides"] == ["height_map.occlusion_samples=16",
+                                                       "height_map.sensor_height=0.05"]
+    assert side["policy"]["config"]["env"]["height_map"]["occlusion_samples"] == 16
+    assert plain.read_bytes() == ruled.read_bytes()
+    # the contract (the robot side) reads the rule from this sidecar alone
+    from mjx_stairs.tools import contract
+    assert contract.load_contract(ruled).hm_occlusion == 16
+
+
+@pytest.mark.parametrize("item,why", [
+    ("height_map.size=11", "expected KEY=VALUE with KEY one of"),
+    ("robot.joint_damping=2.0", "expected KEY=VALUE with KEY one of"),
+    ("height_map.occlusion_samples", "expected KEY=VALUE with KEY one of"),
+    ("height_map.occlusion_samples=many", "occlusion_samples"),
+])
+def test_cli_export_refuses_what_is_not_an_observation_setting(policy_file, tmp_path, capsys,
+                                                              item, why):
+    code = cli.main(["export", "--checkpoint", str(policy_file), "--onnx",
+                     str(tmp_path / "p.onnx"), "--observation", item])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("mjx-stairs export: error:")
+    assert why in err[0]
+    assert not (tmp_path / "p.onnx").exists()
