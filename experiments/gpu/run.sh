@@ -465,7 +465,8 @@ run_step() {
     code-suite)
       args=${CODE_SUITE_ARGS:-}; args=(${args//+/ })  # CODE_SUITE_ARGS: a+b, as a gpuN:
       # token holds no space (unsplit, --env+k=v reached argparse whole, 2026-11-29);
-      # CODE_POLICIES (a+b, NAME=FILE for an uncommitted one; a gpuN: token cannot hold a comma): the suite step for those policies only
+      # CODE_POLICIES (a+b, NAME=FILE for an uncommitted one; a gpuN: token cannot hold a
+      # comma): the suite step for those policies only
       # both: one --steps suite,mesh (a second --steps flag replaced the first: 2026-11-27's
       # CODE_POLICIES=generalist_robot,CODE_MESH=generalist_robot ran the mesh step only)
       steps=(); [ -n "${CODE_POLICIES:-}" ] && steps+=(suite); [ -n "${CODE_MESH:-}" ] && steps+=(mesh)
