@@ -258,8 +258,6 @@ def export_command(checkpoint: str, onnx_path: str, check: bool = False,
     0, 1 (the graph disagrees) or 2 (bad input)."""
     import sys
 
-    from mjx_stairs.rl.policy import load_policy
-
     try:
         policy = with_observation(load_policy(checkpoint), observation)
         export_policy(policy, onnx_path)
