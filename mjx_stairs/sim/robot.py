@@ -69,7 +69,7 @@ class RobotConfig:
 
     kp: float = 35.0  # PD stiffness (N m / rad), the paper's "stiff" variant
     kd: float = 1.0  # PD damping (N m s / rad)
-    torque_scale: float = 1.0  # multiplies the reference torque limits of the PD clamp
+    torque_scale: float = 1.0  # multiplies the reference torque limits of the PD (only) clamp
     action_scale: float = 0.5  # q_target = q_nominal + action_scale * action
     timestep: float = 0.005  # physics step (s)
     solver_iterations: int = 1  # Newton iterations per physics step
@@ -94,13 +94,11 @@ class RobotConfig:
     # A collision sphere on the head (HEAD), a trunk sphere (trunk-contact ending, collision
     # penalty). Off: go2.xml's spheres alone, as every policy up to 2026-11-26 trained.
     head_collision: bool = False
-    # Eleven spheres more along each calf, shaped as go2_full.xml's bowed calf (geoms.CALF_SHAPE,
-    # calf_chain_spheres), counted as calf contacts. Off: go2.xml's spheres alone, as every
-    # policy up to 2026-11-29 trained.
+    # Eleven spheres more along each calf (go2_full.xml's bowed calf: geoms.CALF_SHAPE), counted
+    # as calf contacts. Off: go2.xml's spheres alone, as every policy up to 2026-11-29 trained.
     calf_collision: bool = False
-    # Fixed action delay (s), whole physics steps (the previous target holds until then), as
-    # sim2sim's --latency-ms; at most one policy step. Evaluating with a delay: `--env
-    # robot.action_delay_s=0.02` (env.randomization.action_delay_s draws it per robot instead).
+    # Fixed action delay (s) in whole physics steps (the previous target holds), at most one policy
+    # step, as sim2sim's --latency-ms (`--env robot.action_delay_s=0.02`; or drawn per robot).
     action_delay_s: float = 0.0
     # s: every geom's contact solref time constant in MJX and the ground truth's box world (0:
     # MuJoCo's 0.02, as sim2sim keeps); the evaluation physics's 0.01 (PHYSICS).
@@ -257,6 +255,8 @@ def apply_robot_settings(spec: mujoco.MjSpec, config: RobotConfig) -> None:
     if config.calf_collision:
         add_calf_chains(spec, LEGS)
     solref.set_timeconst(spec, config.contact_timeconst)
+    for act in spec.actuators:  # the PD's clamp (pd_torque: torque_scale, motor_strength) is
+        act.ctrllimited = False  # the only one; go2.xml's ctrlrange would cap it at 1x
     if not config.shin_collision:
         for name in SPHERE_GROUPS["shin"]:
             spec.geom(name).contype = 0

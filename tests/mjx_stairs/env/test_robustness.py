@@ -237,3 +237,15 @@ def test_implicit_damping_follows_the_continuous_joint_where_explicit_does_not()
             assert err[False] > ratio * err[True], err
         else:
             assert abs(err[False] - err[True]) < 0.3 * err[False], err
+
+
+def test_a_motor_drawn_stronger_gets_its_torque_past_the_nominal_limit(env, rollout, actuate):
+    """motor_strength (randomization.motor_strength, with robot.torque_scale) scales the PD's
+    torque clamp; the model's own actuators add no second clamp at the nominal limit under it."""
+    data, info = _standing(env, rollout)
+    action = jnp.asarray([8.0, -8.0, 0.0] * 4)  # hips and thighs 2 rad off: past any clamp
+    hip_thigh = np.array([0, 1, 3, 4, 6, 7, 9, 10])
+    for strength in (0.9, 1.1, 1.3):
+        out = actuate(data, action, dict(info, motor_strength=jnp.full(12, strength)))[0]
+        force = np.abs(np.asarray(out.actuator_force))[hip_thigh]
+        np.testing.assert_allclose(force, strength * rb.TORQUE_LIMIT[hip_thigh], rtol=1e-5)
