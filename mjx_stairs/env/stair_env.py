@@ -31,17 +31,12 @@ from brax.envs.base import Env, State
 from mujoco import mjx
 
 from mjx_stairs.env import curriculum as cur
-from mjx_stairs.env import endings, goals, observation, perception, routes
+from mjx_stairs.env import endings, goals, observation, perception, routes, symmetry
 from mjx_stairs.env import randomization as dr
 from mjx_stairs.env import rewards as rw
 from mjx_stairs.env.actuation import STEP_INPUTS, Actuator
 from mjx_stairs.env.config import EnvConfig
-from mjx_stairs.env.geometry import (
-    Kinematics,
-    base_kinematics,
-    wrap_angle,
-    yaw_quat,
-)
+from mjx_stairs.env.geometry import Kinematics, base_kinematics, wrap_angle, yaw_quat
 from mjx_stairs.env.terrain import Terrain
 from mjx_stairs.env.tiles import TileTables, waypoint_on
 from mjx_stairs.sim import robot as rb
@@ -105,6 +100,10 @@ class StairEnv(Env):
     @property
     def map_shape(self) -> tuple[int, int]:
         return (self.config.height_map.size, self.config.height_map.size)
+
+    @property
+    def mirror(self) -> symmetry.Mirror:  # left-right, for the trainer's ppo.mirror_loss_coef
+        return symmetry.of_config(self.config)
 
     @property
     def action_size(self) -> int:

@@ -47,6 +47,12 @@ class PPOConfig:
         metadata={"help": "upper bound of the policy std, applied after each Adam step (0 = none)"},
     )
     value_loss_coef: float = field(default=1.0, metadata={"help": "value loss weight"})
+    mirror_loss_coef: float = field(
+        default=0.0,
+        metadata={"help": "weight of the left-right symmetry loss: mean squared difference of the "
+                  "mean action on mirrored observations and the mirrored mean action "
+                  "(env.symmetry; 0 = off)"},
+    )
     max_grad_norm: float = field(default=1.0, metadata={"help": "global-norm clip (0 = off)"})
     normalize_advantages: bool = field(
         default=True, metadata={"help": "normalise advantages per minibatch"}
@@ -162,8 +168,10 @@ def ppo_loss(
     cfg: PPOConfig,
     net_cfg: NetworkConfig,
     layout: ObsLayout,
+    mirror: Any = None,
 ) -> tuple[jax.Array, dict[str, jax.Array]]:
-    """Clipped surrogate + (clipped) value loss - entropy bonus on one minibatch [N, ...]."""
+    """Clipped surrogate + (clipped) value loss - entropy bonus on one minibatch [N, ...] (+ the
+    symmetry loss with `cfg.mirror_loss_coef` and `mirror`)."""
     mean, value = policy_mean_and_value(params, norm, batch.obs, batch.critic_obs, net_cfg, layout)
     log_std = params["log_std"]
     log_prob = networks.log_prob(mean, log_std, batch.action)
@@ -201,7 +209,28 @@ def ppo_loss(
         "loss/clip_fraction": clip_frac,
         "policy/std": jnp.mean(jnp.exp(log_std)),
     }
+    if cfg.mirror_loss_coef > 0:
+        sym = mirror_loss(params, norm, batch.obs, mean, net_cfg, layout, mirror)
+        loss = loss + cfg.mirror_loss_coef * sym
+        aux.update({"loss/total": loss, "loss/mirror": sym})
     return loss, aux
+
+
+def mirror_loss(params, norm, obs, mean, net_cfg: NetworkConfig, layout: ObsLayout,
+                mirror: Any) -> jax.Array:
+    """Mean squared difference of the policy's mean on the mirrored observations and its mean
+    `mean` [N, A] mirrored, the latter a fixed target (rsl_rl's mirror loss). `mirror`: the env's
+    (env.symmetry.Mirror: .obs and .act, each a signed permutation with .index and .sign)."""
+    if mirror is None:
+        raise ValueError("ppo.mirror_loss_coef > 0 needs the env's left-right mirror (env.mirror)")
+    mirrored = policy_mean(params, norm, signed_permutation(obs, mirror.obs), net_cfg, layout)
+    target = jax.lax.stop_gradient(signed_permutation(mean, mirror.act))
+    return jnp.mean(jnp.sum(jnp.square(mirrored - target), axis=-1))
+
+
+def signed_permutation(x: jax.Array, signed) -> jax.Array:
+    """x [..., n] -> x[..., signed.index] * signed.sign (a mirror of env.symmetry)."""
+    return jnp.take(x, jnp.asarray(signed.index), axis=-1) * jnp.asarray(signed.sign, x.dtype)
 
 
 # ----------------------------------------------------------------------------- SGD
@@ -216,11 +245,12 @@ def minibatch_step(
     cfg: PPOConfig,
     net_cfg: NetworkConfig,
     layout: ObsLayout,
+    mirror: Any = None,
 ) -> tuple[tuple[Params, optim.AdamState], dict[str, jax.Array]]:
     """Loss and grads on one minibatch, KL-adapted lr (rsl_rl: before the step), clip, Adam."""
     params, opt_state = carry
     grad_fn = jax.value_and_grad(ppo_loss, has_aux=True)
-    (_, aux), grads = grad_fn(params, norm, batch, old_log_std, cfg, net_cfg, layout)
+    (_, aux), grads = grad_fn(params, norm, batch, old_log_std, cfg, net_cfg, layout, mirror)
     if cfg.lr_schedule == "adaptive":
         lr = optim.adapt_lr(opt_state.lr, aux["loss/kl"], cfg.desired_kl, cfg.min_lr, cfg.max_lr)
         opt_state = opt_state._replace(lr=lr)
@@ -255,6 +285,7 @@ def sgd_step(
     net_cfg: NetworkConfig,
     layout: ObsLayout,
     constrain: Callable[[Batch], Batch],
+    mirror: Any = None,
 ) -> tuple[tuple[Params, optim.AdamState, jax.Array], dict[str, jax.Array]]:
     """One epoch: shuffle the flattened batch [N, ...], split into M minibatches, scan them."""
     params, opt_state, rng = carry
@@ -262,7 +293,7 @@ def sgd_step(
     shuffled = constrain(shuffle_minibatches(data, key, cfg.num_minibatches))
     step = functools.partial(
         minibatch_step, norm=norm, old_log_std=old_log_std, cfg=cfg, net_cfg=net_cfg,
-        layout=layout,
+        layout=layout, mirror=mirror,
     )
     (params, opt_state), aux = jax.lax.scan(step, (params, opt_state), shuffled)
     return (params, opt_state, rng), aux
@@ -278,10 +309,12 @@ def update(
     net_cfg: NetworkConfig,
     layout: ObsLayout,
     constrain: Callable[[Batch], Batch] = lambda b: b,
+    mirror: Any = None,
 ) -> tuple[Params, optim.AdamState, dict[str, jax.Array]]:
     """One PPO training step on a rollout Batch [T, B, ...]: num_epochs x num_minibatches.
 
-    ``constrain`` may pin the sharding of the split minibatches [M, N / M, ...] (data parallel).
+    ``constrain`` may pin the sharding of the split minibatches [M, N / M, ...] (data parallel);
+    ``mirror`` is the observation's and action's mirror for ``cfg.mirror_loss_coef``.
     Returns new params, optimiser state and the loss metrics averaged over all minibatches
     (``opt/lr`` is the value after the last minibatch).
     """
@@ -293,7 +326,7 @@ def update(
     flat = jax.tree_util.tree_map(lambda x: x.reshape(n, *x.shape[2:]), data)
     epoch = functools.partial(
         sgd_step, data=flat, norm=norm, old_log_std=params["log_std"], cfg=cfg,
-        net_cfg=net_cfg, layout=layout, constrain=constrain,
+        net_cfg=net_cfg, layout=layout, constrain=constrain, mirror=mirror,
     )
     (params, opt_state, _), aux = jax.lax.scan(
         epoch, (params, opt_state, rng), None, length=cfg.num_epochs

@@ -184,6 +184,7 @@ def training_iteration(state: TrainState, _, *, config, env, layout: ObsLayout, 
         params, opt_state, upd_metrics = ppo.update(
             state.params, state.opt_state, state.normalizer, batch, k_update, pc, nc, layout,
             constrain=lambda b: constrain(b, mesh, 1),
+            mirror=env.mirror if pc.mirror_loss_coef > 0 else None,
         )
     norm = updated_normalizer(state.normalizer, tr, nc)
     metrics = {k: jnp.mean(v) for k, v in env_metrics.items()}
@@ -254,6 +255,8 @@ def _check(config, mesh: Mesh) -> None:
     n_dev = mesh.devices.size
     if tc.num_envs % n_dev:
         raise ValueError(f"train.num_envs={tc.num_envs} must divide over {n_dev} devices")
+    if not pc.mirror_loss_coef >= 0:
+        raise ValueError(f"ppo.mirror_loss_coef must be >= 0, got {pc.mirror_loss_coef}")
     n = tc.num_envs * tc.unroll_length
     if n % pc.num_minibatches:
         raise ValueError(
@@ -285,6 +288,9 @@ def build_trainer(config, env, mesh: Mesh | None = None) -> Trainer:
     """
     mesh = make_mesh() if mesh is None else mesh
     _check(config, mesh)
+    if config.ppo.mirror_loss_coef > 0 and getattr(env, "mirror", None) is None:
+        raise ValueError(f"ppo.mirror_loss_coef = {config.ppo.mirror_loss_coef} needs an env "
+                         "with a left-right mirror (env.mirror); this env has none")
     config = _compiled_config(config)
     key = (config, id(env), tuple(d.id for d in mesh.devices.flat))
     hit = _TRAINERS.get(key)

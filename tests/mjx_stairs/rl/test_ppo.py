@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 from brax.training.agents.ppo.losses import compute_gae as brax_compute_gae
 
+from mjx_stairs.env import symmetry
 from mjx_stairs.rl import networks, normalizer, optim, ppo
 from mjx_stairs.rl.networks import NetworkConfig, ObsLayout
 from mjx_stairs.rl.ppo import Batch, PPOConfig
@@ -204,3 +206,62 @@ def test_network_conv_impl_reaches_the_encoder(setup):
         np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-6)
     with pytest.raises(ValueError, match="network.conv_impl"):
         ppo.policy_mean(params, norm, batch.obs, dataclasses.replace(NET, conv_impl="x"), LAYOUT)
+
+
+# The mirror of LAYOUT's observation (3 vector entries, the second flips sign; the 5 x 5 map's
+# rows reversed) and of its 2 actions (swapped), as env.symmetry builds the Go2's.
+TOY_MIRROR = symmetry.Mirror(
+    obs=symmetry.Signed(np.concatenate([[0, 1, 2], 3 + np.arange(25).reshape(5, 5)[::-1].ravel()]),
+                        np.array([1.0, -1.0, 1.0] + [1.0] * 25)),
+    act=symmetry.Signed(np.array([1, 0]), np.ones(2)))
+
+
+def _asymmetric(params):
+    """The network with its actor's last layer drawn at full scale (init draws it near 0)."""
+    params = jax.tree_util.tree_map(lambda x: x * 1.0, params)
+    w = params["actor"][-1]["w"]
+    params["actor"][-1]["w"] = 0.5 * jax.random.normal(jax.random.PRNGKey(7), w.shape)
+    return params
+
+
+def _mirror_loss_by_hand(params, norm, obs):
+    mean = np.asarray(ppo.policy_mean(params, norm, obs, NET, LAYOUT))
+    o = np.asarray(obs)[:, TOY_MIRROR.obs.index] * TOY_MIRROR.obs.sign
+    mirrored = np.asarray(ppo.policy_mean(params, norm, jnp.asarray(o), NET, LAYOUT))
+    return np.mean(np.sum((mirrored - mean[:, ::-1]) ** 2, axis=-1))
+
+
+def test_mirror_loss_by_hand_and_off_by_default(setup):
+    params, norm = _asymmetric(setup[0]), setup[1]
+    batch = _batch(params, norm)
+    base, aux0 = ppo.ppo_loss(params, norm, batch, params["log_std"], PPOConfig(), NET, LAYOUT)
+    assert "loss/mirror" not in aux0
+    cfg = PPOConfig(mirror_loss_coef=2.0)
+    loss, aux = ppo.ppo_loss(params, norm, batch, params["log_std"], cfg, NET, LAYOUT, TOY_MIRROR)
+    want = _mirror_loss_by_hand(params, norm, batch.obs)
+    assert want > 1e-2  # a random network is not symmetric
+    assert float(aux["loss/mirror"]) == pytest.approx(want, rel=1e-4)
+    assert float(loss) == pytest.approx(float(base) + 2.0 * want, rel=1e-5)
+    with pytest.raises(ValueError, match="left-right mirror"):
+        ppo.ppo_loss(params, norm, batch, params["log_std"], cfg, NET, LAYOUT)
+
+
+def test_the_mirror_loss_makes_the_policy_symmetric(setup):
+    """Updates on zero advantages: with the mirror loss the policy's asymmetry falls to a small
+    part of where it started; without it, it does not."""
+    params, norm = _asymmetric(setup[0]), setup[1]
+    data = _batch(params, norm, n=64)
+    start = _mirror_loss_by_hand(params, norm, data.obs)
+    data = jax.tree_util.tree_map(lambda x: x.reshape(8, 8, *x.shape[1:]),
+                                  data._replace(advantage=jnp.zeros_like(data.advantage)))
+    cfg = PPOConfig(num_epochs=8, num_minibatches=2, learning_rate=3e-3, lr_schedule="fixed",
+                    entropy_coef=0.0, value_loss_coef=0.0)
+    opt = optim.adam_init(params, cfg.learning_rate)
+    update = jax.jit(functools.partial(ppo.update, mirror=TOY_MIRROR), static_argnums=(5, 6, 7))
+    after = {}
+    for coef in (0.0, 1.0):
+        new = update(params, opt, norm, data, jax.random.PRNGKey(1),
+                     dataclasses.replace(cfg, mirror_loss_coef=coef), NET, LAYOUT)[0]
+        after[coef] = _mirror_loss_by_hand(new, norm, data.obs.reshape(64, -1))
+    assert after[1.0] < 0.2 * start
+    assert after[0.0] > 0.5 * start

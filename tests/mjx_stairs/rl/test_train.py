@@ -82,6 +82,10 @@ def test_bad_sizes_are_clear_errors():
     cfg = replace(LEARN_CFG, ppo=PPOConfig(num_minibatches=7))
     with pytest.raises(ValueError, match="does not split into ppo.num_minibatches=7"):
         train_lib.make_train(cfg, PointReach())
+    for coef, message in ((1.0, "needs an env with a left-right mirror"), (-0.5, ">= 0")):
+        cfg = replace(LEARN_CFG, ppo=PPOConfig(mirror_loss_coef=coef))
+        with pytest.raises(ValueError, match=message):  # the toy env has no mirror
+            train_lib.build_trainer(cfg, PointReach())
 
 
 def test_rollout_values_are_the_critics_values():
