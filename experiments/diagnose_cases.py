@@ -52,6 +52,7 @@ def rollout(env, policy, state):
     """Per step [T, B, ...] records of each robot's first episode (frozen once it ended)."""
     tiles = env.tiles
     rows = env.contact_rows
+    foot_geoms = jnp.asarray(env.robot.ids.foot_geoms)
     torque_limit = jnp.asarray(rb.TORQUE_LIMIT)
 
     def group(d, name):
@@ -103,6 +104,7 @@ def rollout(env, policy, state):
             "x": kin.pos[0], "y": kin.pos[1], "yaw": kin.yaw,
             "yaw_to_route": wrap_angle(target[3] - kin.yaw),
             "saturated": jnp.abs(d.ctrl) > 0.99 * torque_limit,
+            "foot_z": d.geom_xpos[foot_geoms, 2],
             "success": st.info["success"],
         }
 
@@ -114,6 +116,37 @@ def rollout(env, policy, state):
                 "end_pitch": pitch, "end_roll": roll}
 
     return first_episodes(env, policy, state, measure, at_end)
+
+
+def swing_rises(z, touching):
+    """Per foot (FL, FR, RL, RR), how high each swing lifted it: the highest foot centre of a
+    run of steps off the terrain less its height at the lift-off (a swing still open at the end
+    counts). z, touching: [T, 4]. -> 4 lists, m."""
+    out = []
+    for k in range(z.shape[1]):
+        rises, start = [], None
+        for t in range(z.shape[0]):
+            if not touching[t, k] and start is None:
+                start = t
+            elif touching[t, k] and start is not None:
+                rises.append(float(z[start:t, k].max() - z[max(start - 1, 0), k]))
+                start = None
+        if start is not None:
+            rises.append(float(z[start:, k].max() - z[max(start - 1, 0), k]))
+        out.append(rises)
+    return out
+
+
+def swing_summary(rises, riser):
+    """Per foot: its swings (lift-off to touch-down), how high they rose (median, max; m) and the
+    share of them that rose more than a riser (a step up needs the foot that high)."""
+    return {
+        "swings": [len(r) for r in rises],
+        "swing_rise_m": [[round(float(np.median(r)), 3), round(float(np.max(r)), 3)] if r
+                         else None for r in rises],
+        "swings_over_riser": [round(float(np.mean(np.asarray(r) > riser)), 3) if r else None
+                              for r in rises],
+    }
 
 
 def robot_records(env, rec, names, specs, robots, spawn_arc, spawn_z):
@@ -198,6 +231,9 @@ def robot_records(env, rec, names, specs, robots, spawn_arc, spawn_z):
                     np.asarray(rec["saturated"][:end + 1, b]).mean(0), 3).tolist(),
                 "min_clearance_m": float(np.asarray(rec["clearance"][:end + 1, b]).min()),
                 "min_pitch_deg": float(np.degrees(np.asarray(rec["pitch"][:end + 1, b]).min())),
+                **swing_summary(swing_rises(np.asarray(rec["foot_z"][:end + 1, b]),
+                                            np.asarray(rec["foot"][:end + 1, b])),
+                                spec["riser"]),
                 "max_pitch_deg": float(np.degrees(np.asarray(rec["pitch"][:end + 1, b]).max())),
             },
         })
