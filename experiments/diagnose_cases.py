@@ -124,16 +124,9 @@ def swing_rises(z, touching):
     counts). z, touching: [T, 4]. -> 4 lists, m."""
     out = []
     for k in range(z.shape[1]):
-        rises, start = [], None
-        for t in range(z.shape[0]):
-            if not touching[t, k] and start is None:
-                start = t
-            elif touching[t, k] and start is not None:
-                rises.append(float(z[start:t, k].max() - z[max(start - 1, 0), k]))
-                start = None
-        if start is not None:
-            rises.append(float(z[start:, k].max() - z[max(start - 1, 0), k]))
-        out.append(rises)
+        edges = np.diff(np.concatenate([[0], (~touching[:, k]).astype(int), [0]]))
+        runs = zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)
+        out.append([float(z[s:e, k].max() - z[max(s - 1, 0), k]) for s, e in runs])
     return out
 
 

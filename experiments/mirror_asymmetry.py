@@ -20,7 +20,6 @@ import numpy as np
 
 import terrains
 from mjx_stairs.atomic import write_text
-from mjx_stairs.env import symmetry
 from mjx_stairs.rl.policy import load_policy, policy_action
 from mjx_stairs.study import evaluate
 from mjx_stairs.study.specs import EvalSpec
@@ -48,8 +47,8 @@ def asymmetry(path: str, level: int, robots: int, steps: int, seed: int) -> dict
     for _ in range(steps):
         obs = state.obs["privileged_state"]
         a = act(obs)
-        other = act(symmetry.apply(obs, mirror.obs))
-        gap.append(np.asarray(jnp.sum((other - symmetry.apply(a, mirror.act)) ** 2, -1)))
+        other = act(mirror.obs.apply(obs))
+        gap.append(np.asarray(jnp.sum((other - mirror.act.apply(a)) ** 2, -1)))
         size.append(np.asarray(jnp.sum(a ** 2, -1)))
         state = step(state, a)
     gap, size = np.stack(gap), np.stack(size)

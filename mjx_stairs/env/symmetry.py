@@ -10,8 +10,8 @@ abduction flips sign (the nominal pose's hips are mirror images: +-0.1 rad); the
 rows, along the base's y on a grid centred on the base, reverse. Mirroring twice is the identity.
 
     m = symmetry.mirror_of(observation.terms(hm, history), hm.size)   # StairEnv.mirror
-    mirrored_obs = symmetry.apply(obs, m.obs)   # [..., D]
-    mirrored_act = symmetry.apply(act, m.act)   # [..., 12]
+    mirrored_obs = m.obs.apply(obs)   # [..., D]
+    mirrored_act = m.act.apply(act)   # [..., 12]
 """
 
 from __future__ import annotations
@@ -32,6 +32,10 @@ class Signed(NamedTuple):
 
     index: np.ndarray  # [n] int
     sign: np.ndarray  # [n] float, +-1
+
+    def apply(self, x: jnp.ndarray) -> jnp.ndarray:
+        """x [..., n] mirrored: x[..., index] * sign."""
+        return jnp.take(x, jnp.asarray(self.index), axis=-1) * jnp.asarray(self.sign, x.dtype)
 
 
 class Mirror(NamedTuple):
@@ -101,8 +105,3 @@ def of_config(config) -> Mirror:
     """The mirror of the observation an env of this EnvConfig builds (env.observation)."""
     hm = config.height_map
     return mirror_of(observation.terms(hm, config.obs_history), hm.size)
-
-
-def apply(x: jnp.ndarray, m: Signed) -> jnp.ndarray:
-    """x [..., n] mirrored: x[..., index] * sign."""
-    return jnp.take(x, jnp.asarray(m.index), axis=-1) * jnp.asarray(m.sign, x.dtype)

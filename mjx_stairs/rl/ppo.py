@@ -220,17 +220,12 @@ def mirror_loss(params, norm, obs, mean, net_cfg: NetworkConfig, layout: ObsLayo
                 mirror: Any) -> jax.Array:
     """Mean squared difference of the policy's mean on the mirrored observations and its mean
     `mean` [N, A] mirrored, the latter a fixed target (rsl_rl's mirror loss). `mirror`: the env's
-    (env.symmetry.Mirror: .obs and .act, each a signed permutation with .index and .sign)."""
+    (env.symmetry.Mirror: .obs and .act, each a signed permutation with .apply(x))."""
     if mirror is None:
         raise ValueError("ppo.mirror_loss_coef > 0 needs the env's left-right mirror (env.mirror)")
-    mirrored = policy_mean(params, norm, signed_permutation(obs, mirror.obs), net_cfg, layout)
-    target = jax.lax.stop_gradient(signed_permutation(mean, mirror.act))
+    mirrored = policy_mean(params, norm, mirror.obs.apply(obs), net_cfg, layout)
+    target = jax.lax.stop_gradient(mirror.act.apply(mean))
     return jnp.mean(jnp.sum(jnp.square(mirrored - target), axis=-1))
-
-
-def signed_permutation(x: jax.Array, signed) -> jax.Array:
-    """x [..., n] -> x[..., signed.index] * signed.sign (a mirror of env.symmetry)."""
-    return jnp.take(x, jnp.asarray(signed.index), axis=-1) * jnp.asarray(signed.sign, x.dtype)
 
 
 # ----------------------------------------------------------------------------- SGD

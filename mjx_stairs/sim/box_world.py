@@ -93,7 +93,6 @@ def _pd_actuators(spec: mujoco.MjSpec, config: rb.RobotConfig) -> None:
         act.gainprm[0] = config.kp
         act.biastype = mujoco.mjtBias.mjBIAS_AFFINE
         act.biasprm[:3] = [0.0, -config.kp, -config.kd]
-        act.ctrllimited = False
         act.forcelimited = True
         act.forcerange = [-float(limit), float(limit)]
 
