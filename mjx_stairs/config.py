@@ -137,7 +137,7 @@ def from_dict(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
             raise ConfigError(f"unknown config key '{key}' ({cls.__name__} has: {known})")
         tp = hints[name]
         if dataclasses.is_dataclass(tp) and isinstance(value, Mapping):
-            value = _merge(to_dict(_default(fields[name])), value)
+            value = deep_merge(to_dict(_default(fields[name])), value)
         kwargs[name] = _convert(value, tp, key)
     try:
         return cls(**kwargs)
@@ -153,13 +153,14 @@ def _default(f: dataclasses.Field) -> Any:
     return None
 
 
-def _merge(base: Any, update: Mapping[str, Any]) -> Any:
+def deep_merge(base: Any, update: Mapping[str, Any]) -> Any:
     """Deep-merge ``update`` into the plain dict ``base`` (a nested dataclass's default)."""
     if not isinstance(base, dict):
         return dict(update)
     out = dict(base)
     for k, v in update.items():
-        out[k] = _merge(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), dict) else v
+        nested = isinstance(v, Mapping) and isinstance(out.get(k), dict)
+        out[k] = deep_merge(out[k], v) if nested else v
     return out
 
 
@@ -215,11 +216,12 @@ def apply_overrides(data: dict[str, Any], overrides: Iterable[str]) -> dict[str,
     return data
 
 
-def read_toml(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
-    """The table of a TOML file; a missing or malformed file is a one-line ConfigError.
+def read_toml_chain(path: str | Path, _seen: tuple[Path, ...] = ()) -> list[dict[str, Any]]:
+    """The tables of a TOML file and of the files it inherits from, the first base first; a
+    missing or malformed file is a one-line ConfigError.
 
-    A top-level ``base = "other.toml"`` (relative to the file) inherits: the file's tables are
-    deep-merged over the base's (recursively: a base may have a base of its own)."""
+    A top-level ``base = "other.toml"`` (relative to the file) inherits (recursively: a base may
+    have a base of its own); read_toml merges the chain."""
     path = Path(path)
     try:
         with path.open("rb") as f:
@@ -230,13 +232,24 @@ def read_toml(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
         raise ConfigError(f"{path}: invalid TOML: {e}") from None
     base = data.pop("base", None)
     if base is None:
-        return data
+        return [data]
     if not isinstance(base, str):
         raise ConfigError(f"{path}: base: expected a file name, got {base!r}")
     base_path = (path.parent / base).resolve()
     if base_path in _seen or base_path == path.resolve():
         raise ConfigError(f"{path}: base: '{base}' inherits from itself")
-    return _merge(read_toml(base_path, (*_seen, path.resolve())), data)
+    return [*read_toml_chain(base_path, (*_seen, path.resolve())), data]
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The table of a TOML file; a missing or malformed file is a one-line ConfigError.
+
+    A top-level ``base = "other.toml"`` (relative to the file) inherits: the file's tables are
+    deep-merged over the base's (recursively: a base may have a base of its own)."""
+    merged: dict[str, Any] = {}
+    for table in read_toml_chain(path):
+        merged = deep_merge(merged, table)
+    return merged
 
 
 def load_config(

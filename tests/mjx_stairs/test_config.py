@@ -159,6 +159,9 @@ def test_every_experiment_file_loads_on_gpu_and_cpu_presets(path):
                              else "evaluation_top" if paper
                              else "evaluation" if path.name.startswith("generalist_")  # variants
                              else "reference")]
+    # a field a file sets over its base's preset (training's contact at go2.xml's 0.02 s)
+    want = {**want, **{"generalist_from_stage1_mix_soft.toml": {"contact_timeconst": 0.02}}.get(
+        path.name, {})}
     assert {k: getattr(cfg.env.robot, k) for k in want} == want
     # the bfloat16 encoder only where its stage-2 training was checked
     bf16 = path.name in ("stage2_u_lean.toml", "generalist_lean.toml")
@@ -213,3 +216,27 @@ def test_physics_presets_set_the_physics_fields_in_order():
     assert later.env.robot.ls_iterations == 4 and later.env.robot.shin_collision
     with pytest.raises(ConfigError, match="'robot.physics': expected one of"):
         experiment.load("experiments/stage2_u.toml", ["env.robot.physics=fast"], cpu=False)
+
+
+def test_a_field_a_file_sets_wins_over_its_base_physics_preset(tmp_path):
+    # a preset in a base file once silently won over a field the inheriting file set
+    # (generalist_from_stage1_mix_soft.toml's contact time constant)
+    from mjx_stairs.sim.robot import PHYSICS
+    from mjx_stairs.study import experiment
+
+    (tmp_path / "a.toml").write_text('[env.robot]\nphysics = "evaluation"\n')
+    (tmp_path / "b.toml").write_text('base = "a.toml"\n[env.robot]\ncontact_timeconst = 0.02\n')
+    (tmp_path / "c.toml").write_text('base = "b.toml"\n[env.robot]\nphysics = "lean"\n')
+    a, _ = experiment.load(tmp_path / "a.toml", cpu=False)
+    b, _ = experiment.load(tmp_path / "b.toml", cpu=False)
+    c, _ = experiment.load(tmp_path / "c.toml", cpu=False)
+    evaluation = PHYSICS["evaluation"]["contact_timeconst"]
+    assert a.env.robot.contact_timeconst == evaluation != 0.02
+    assert b.env.robot.contact_timeconst == 0.02
+    assert b.env.robot.sunk_exit == PHYSICS["evaluation"]["sunk_exit"]  # the rest of the preset
+    # a file's own preset replaces its base's whole (the fields the evaluation preset set are
+    # back at their defaults); the field b set stays, the lean preset not naming it
+    default = experiment.load(None, cpu=False)[0].env.robot
+    assert c.env.robot.contact_timeconst == 0.02
+    assert c.env.robot.sunk_exit == default.sunk_exit != PHYSICS["evaluation"]["sunk_exit"]
+    assert {k: getattr(c.env.robot, k) for k in PHYSICS["lean"]} == PHYSICS["lean"]
