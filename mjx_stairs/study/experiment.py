@@ -144,13 +144,14 @@ def _read_with_physics(path: Path) -> dict[str, Any]:
     """An experiment file merged over its bases, with the physics preset that the last file
     naming one names (``[env.robot] physics``) expanded there: the preset wins over the fields
     set beside it and in the bases before it, the fields of the files inheriting it win over
-    the preset. (Until 2026-11-29 a base's preset also won over an inheriting file's fields,
-    silently; no committed experiment file's config changed with the rule.)"""
+    the preset (until 2026-11-29 a base's preset won over them too)."""
     chain = read_toml_chain(path)
-    names = [i for i, t in enumerate(chain)
-             if "physics" in (t.get("env", {}) if isinstance(t.get("env"), dict) else {}).get(
-                 "robot", {})]
-    last = names[-1] + 1 if names else 0
+
+    def names_physics(table: dict[str, Any]) -> bool:
+        robot = table.get("env", {}).get("robot", {}) if isinstance(table.get("env"), dict) else {}
+        return isinstance(robot, dict) and "physics" in robot
+
+    last = max((i + 1 for i, t in enumerate(chain) if names_physics(t)), default=0)
     data: dict[str, Any] = {}
     for table in chain[:last]:
         data = deep_merge(data, table)
