@@ -24,7 +24,7 @@
 # matrix and the RQ1 policies in the evaluation physics), paper, paper-no-stall, eval-paper,
 # eval-paper-committed
 # (issue 21: stage 2 as the paper has it, SEED=N), straight-paper, l-shaped-paper, spiral-paper,
-# transfer-paper (RQ2 in the paper's setting), eval-names (named policies at 1000 robots), bench-options (issue 22: the speed of
+# transfer-paper (RQ2 in the paper's setting), eval-names (named policies at 1000 robots; EVAL_SEED=N: the resets' seed, 0 unless set), bench-options (issue 22: the speed of
 # physics between columns and the evaluation physics), stage2-physics, eval-physics (issue 22:
 # stage 2 trained in one physics option, judged in the evaluation physics), warp (MuJoCo Warp's
 # speed and success), wait-policy (a group waits for a run another GPU trains), gpus, pack; and
@@ -253,11 +253,11 @@ eval_names() {
   [ -n "${EVAL_ENV:-}" ] && env=(--env ${EVAL_ENV//+/ })
   for name in ${EVAL_NAMES//+/ }; do
     p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
-    out=$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}/${EVAL_FAMILIES//+/-}
+    out=$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}${EVAL_SEED:+_seed$EVAL_SEED}/${EVAL_FAMILIES//+/-}
     [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
     timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
       --family ${EVAL_FAMILIES//+/ } --direction "${EVAL_DIRECTION:-up}" "${env[@]}" \
-      --out "$out" 2>&1 | grep -v warp
+      --seed "${EVAL_SEED:-0}" --out "$out" 2>&1 | grep -v warp
   done
 }
 
