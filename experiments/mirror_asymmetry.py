@@ -1,8 +1,8 @@
 """How lopsided a policy is: along its own rollouts, its mean action on the mirrored observation
-against its mirrored mean action (env.symmetry; the quantity PPO's `ppo.mirror_loss_coef`
-weighs), on a straight flight made exactly its own mirror image about its centre-line (MJX on
-the CPU, the policy's evaluation env: its trained env config in the evaluation physics and
-settings, study.evaluate.eval_env). A left-right symmetric policy scores 0.
+against its mirrored mean action (env.symmetry; ppo.mirror_loss, the quantity PPO's
+`ppo.mirror_loss_coef` weighs), on a straight flight made exactly its own mirror image about its
+centre-line (MJX on the CPU, the policy's evaluation env: its trained env config in the
+evaluation physics and settings, study.evaluate.eval_env). A left-right symmetric policy scores 0.
 
     PYTHONPATH=. JAX_PLATFORMS=cpu python experiments/mirror_asymmetry.py \
         experiments/results/generalist_from_stage1_more/policy.npz --levels 2 6 --out asym.json
@@ -20,6 +20,7 @@ import numpy as np
 
 import terrains
 from mjx_stairs.atomic import write_text
+from mjx_stairs.rl import ppo
 from mjx_stairs.rl.policy import load_policy, policy_action
 from mjx_stairs.study import evaluate
 from mjx_stairs.study.specs import EvalSpec
@@ -37,24 +38,24 @@ def mirrored_straight_atlas(level: int):
 def asymmetry(path: str, level: int, robots: int, steps: int, seed: int) -> dict:
     policy = load_policy(path)
     env = evaluate.eval_env(policy, mirrored_straight_atlas(level), EvalSpec())
-    mirror = env.mirror
     act = jax.jit(lambda o: policy_action(policy, o))
+    loss = jax.jit(lambda o, a: ppo.mirror_loss(policy.params, policy.normalizer,
+                                                o.astype(jnp.float32), a, policy.network,
+                                                policy.layout, env.mirror))
     state = jax.jit(jax.vmap(env.reset_at))(jax.random.split(jax.random.PRNGKey(seed), robots),
                                             jnp.zeros(robots, jnp.int32),
                                             jnp.zeros(robots, jnp.int32))
     step = jax.jit(jax.vmap(env.step))
-    gap, size = [], []
+    gap, size = [], []  # per step, means over the robots (kept on the device until the end)
     for _ in range(steps):
         obs = state.obs["privileged_state"]
         a = act(obs)
-        other = act(mirror.obs.apply(obs))
-        gap.append(np.asarray(jnp.sum((other - mirror.act.apply(a)) ** 2, -1)))
-        size.append(np.asarray(jnp.sum(a ** 2, -1)))
+        gap.append(loss(obs, a))
+        size.append(jnp.mean(jnp.sum(a ** 2, -1)))
         state = step(state, a)
-    gap, size = np.stack(gap), np.stack(size)
     return {"policy": path, "level": level, "robots": robots, "steps": steps,
-            "mirror_loss": round(float(gap.mean()), 3),
-            "mean_squared_action": round(float(size.mean()), 3)}
+            "mirror_loss": round(float(np.mean(jax.device_get(gap))), 3),
+            "mean_squared_action": round(float(np.mean(jax.device_get(size))), 3)}
 
 
 def main() -> None:

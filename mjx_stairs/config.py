@@ -137,7 +137,7 @@ def from_dict(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
             raise ConfigError(f"unknown config key '{key}' ({cls.__name__} has: {known})")
         tp = hints[name]
         if dataclasses.is_dataclass(tp) and isinstance(value, Mapping):
-            value = deep_merge(to_dict(_default(fields[name])), value)
+            value = _merge(to_dict(_default(fields[name])), value)
         kwargs[name] = _convert(value, tp, key)
     try:
         return cls(**kwargs)
@@ -153,14 +153,13 @@ def _default(f: dataclasses.Field) -> Any:
     return None
 
 
-def deep_merge(base: Any, update: Mapping[str, Any]) -> Any:
+def _merge(base: Any, update: Mapping[str, Any]) -> Any:
     """Deep-merge ``update`` into the plain dict ``base`` (a nested dataclass's default)."""
     if not isinstance(base, dict):
         return dict(update)
     out = dict(base)
     for k, v in update.items():
-        nested = isinstance(v, Mapping) and isinstance(out.get(k), dict)
-        out[k] = deep_merge(out[k], v) if nested else v
+        out[k] = _merge(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), dict) else v
     return out
 
 
@@ -246,9 +245,14 @@ def read_toml(path: str | Path) -> dict[str, Any]:
 
     A top-level ``base = "other.toml"`` (relative to the file) inherits: the file's tables are
     deep-merged over the base's (recursively: a base may have a base of its own)."""
+    return merge_tables(read_toml_chain(path))
+
+
+def merge_tables(tables: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+    """The tables deep-merged in order, each over the ones before it."""
     merged: dict[str, Any] = {}
-    for table in read_toml_chain(path):
-        merged = deep_merge(merged, table)
+    for table in tables:
+        merged = _merge(merged, table)
     return merged
 
 

@@ -17,7 +17,7 @@ from typing import Any, Iterable, Literal
 
 import jax
 
-from mjx_stairs.config import ConfigError, apply_overrides, deep_merge, from_dict, read_toml_chain
+from mjx_stairs.config import ConfigError, apply_overrides, from_dict, merge_tables, read_toml_chain
 from mjx_stairs.env.config import EnvConfig
 from mjx_stairs.env.rewards import PRESETS
 from mjx_stairs.env.stair_env import StairEnv
@@ -152,13 +152,7 @@ def _read_with_physics(path: Path) -> dict[str, Any]:
         return isinstance(robot, dict) and "physics" in robot
 
     last = max((i + 1 for i, t in enumerate(chain) if names_physics(t)), default=0)
-    data: dict[str, Any] = {}
-    for table in chain[:last]:
-        data = deep_merge(data, table)
-    data = _with_physics(data)
-    for table in chain[last:]:
-        data = deep_merge(data, table)
-    return data
+    return merge_tables([_with_physics(merge_tables(chain[:last])), *chain[last:]])
 
 
 def _with_physics(data: dict[str, Any]) -> dict[str, Any]:
