@@ -214,6 +214,13 @@ class EnvConfig:
     # Policy steps of history in the observation (env.observation.history_terms: the joint
     # positions and actions of that many earlier steps); 0: one frame, as every published policy.
     obs_history: int = 0
+    # The action delay as an observation term (env.observation.DELAY_TERM, after the history):
+    # the time a PD target waits before it takes effect, which a robot program measures once
+    # (command to motor) and the env knows per robot (randomization.action_delay_s, or
+    # robot.action_delay_s). Why (docs/deploy.md "The corner, trained"): one frame cannot tell a
+    # 20 ms delay from none, and a policy trained over both holds only one diagonal of the
+    # damping x delay square; false: not observed, as every published policy.
+    obs_action_delay: bool = False
 
     def __post_init__(self):
         lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
@@ -224,6 +231,8 @@ class EnvConfig:
             ("obs_history", self.obs_history,
              isinstance(self.obs_history, int) and 0 <= self.obs_history <= 50,
              "an integer in [0, 50] (policy steps)"),
+            ("obs_action_delay", self.obs_action_delay, isinstance(self.obs_action_delay, bool),
+             "true or false"),
             ("randomization.action_delay_s", lag, lag <= step + 1e-9,
              f"at most one policy step ({step:g} s)"),
             ("robot.action_delay_s", fixed, 0.0 <= fixed <= step + 1e-9,

@@ -83,14 +83,26 @@ def shift_in(history: jnp.ndarray, newest: jnp.ndarray) -> jnp.ndarray:
     return jnp.concatenate([newest[..., None, :], history[..., :-1, :]], axis=-2)
 
 
-def vector_terms(history: int = 0) -> tuple[ObsTerm, ...]:
-    """The vector part, in order, with `history` steps of history."""
-    return (*VECTOR, *history_terms(history))
+DELAY_SCALE = 50.0
+"""1 / s: the action delay term reads 1 at 20 ms (one policy step), the most training draws."""
+
+DELAY_TERM = ObsTerm(
+    "action_delay", 1, "s", None, DELAY_SCALE,
+    "the action delay: from the moment the observation is measured to the moment the PD target "
+    "computed from it takes effect at the motors (a robot program measures its own once); value "
+    f"= {DELAY_SCALE:g} * delay_s, 1 at 20 ms")
+"""With env.obs_action_delay, after the history terms (the vector part's last entry)."""
 
 
-def n_vec(history: int = 0) -> int:
-    """Length of the vector part with `history` steps of history."""
-    return sum(t.size for t in vector_terms(history))
+def vector_terms(history: int = 0, delay: bool = False) -> tuple[ObsTerm, ...]:
+    """The vector part, in order, with `history` steps of history and, with `delay`, the action
+    delay last."""
+    return (*VECTOR, *history_terms(history), *((DELAY_TERM,) if delay else ()))
+
+
+def n_vec(history: int = 0, delay: bool = False) -> int:
+    """Length of the vector part with `history` steps of history (and the delay term)."""
+    return sum(t.size for t in vector_terms(history, delay))
 
 
 def height_map_term(hm: HeightMapConfig) -> ObsTerm:
@@ -100,21 +112,27 @@ def height_map_term(hm: HeightMapConfig) -> ObsTerm:
                    f"-{hm.clip}, {hm.clip})")
 
 
-def terms(hm: HeightMapConfig, history: int = 0) -> tuple[ObsTerm, ...]:
+def terms(hm: HeightMapConfig, history: int = 0, delay: bool = False) -> tuple[ObsTerm, ...]:
     """Every term of an observation, in order."""
-    return (*vector_terms(history), height_map_term(hm))
+    return (*vector_terms(history, delay), height_map_term(hm))
 
 
-def size(hm: HeightMapConfig, history: int = 0) -> int:
+def size(hm: HeightMapConfig, history: int = 0, delay: bool = False) -> int:
     """Floats per observation."""
-    return n_vec(history) + hm.size * hm.size
+    return n_vec(history, delay) + hm.size * hm.size
+
+
+def of_config(config) -> tuple[ObsTerm, ...]:
+    """Every term of the observation an env of this EnvConfig builds."""
+    return terms(config.height_map, config.obs_history, config.obs_action_delay)
 
 
 def assemble(values: dict[str, jnp.ndarray], hm: HeightMapConfig, noise: NoiseConfig,
-             rng: jax.Array | None, history: int = 0) -> dict[str, jnp.ndarray]:
+             rng: jax.Array | None, history: int = 0,
+             delay: bool = False) -> dict[str, jnp.ndarray]:
     """{"state", "privileged_state"} [size] from {term name: [term size]}; with ``rng`` None or
     the noise off both are clean."""
-    table = terms(hm, history)
+    table = terms(hm, history, delay)
     clean = jnp.concatenate([values[t.name] if t.scale == 1.0 else t.scale * values[t.name]
                              for t in table])
     if not noise.enabled or rng is None:

@@ -94,7 +94,7 @@ class StairEnv(Env):
 
     @property
     def observation_size(self) -> dict[str, tuple[int, ...]]:
-        n = observation.size(self.config.height_map, self.config.obs_history)
+        n = sum(t.size for t in observation.of_config(self.config))
         return {"state": (n,), "privileged_state": (n,)}
 
     @property
@@ -359,11 +359,15 @@ class StairEnv(Env):
                                      wrap_angle(goal[3] - kin.yaw)[None]]),
             "height_map": self.height_map(kin.pos, kin.yaw, info["tile"]),
         }
-        if self.config.obs_history:
+        c = self.config
+        if c.obs_history:
             values.update(joint_pos_history=info["joint_pos_history"].reshape(-1),
                           action_history=info["action_history"].reshape(-1))
-        obs = observation.assemble(values, self.config.height_map, self.config.noise, rng,
-                                   self.config.obs_history)
+        if c.obs_action_delay:  # this robot's delay (actuation: whole physics steps), s
+            steps = info.get("delay_steps", jnp.zeros((), jnp.int32))
+            values["action_delay"] = (steps * c.robot.timestep).astype(jnp.float32)[None]
+        obs = observation.assemble(values, c.height_map, c.noise, rng, c.obs_history,
+                                   c.obs_action_delay)
         return perception.corrupt(obs, info, rng, self.config)
 
     def pack_state(self, state: State) -> dict[str, Any]:

@@ -58,6 +58,7 @@ _VECTOR_SIGNS = {  # the vector terms: their own components, signs only
     "base_ang_vel": (-1.0, 1.0, -1.0),
     "projected_gravity": (1.0, -1.0, 1.0),
     "goal": (1.0, -1.0, 1.0, -1.0),  # x, y, z in the base frame, then the yaw error
+    "action_delay": (1.0,),  # a time: the same in the mirror
 }
 _JOINT_TERMS = ("joint_pos", "joint_vel", "last_action", "joint_pos_history", "action_history")
 
@@ -103,5 +104,4 @@ def mirror_of(terms: Sequence, map_side: int) -> Mirror:
 
 def of_config(config) -> Mirror:
     """The mirror of the observation an env of this EnvConfig builds (env.observation)."""
-    hm = config.height_map
-    return mirror_of(observation.terms(hm, config.obs_history), hm.size)
+    return mirror_of(observation.of_config(config), config.height_map.size)

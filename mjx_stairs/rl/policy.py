@@ -110,7 +110,7 @@ def load_policy(path: str | Path) -> Policy:
 
 
 def widen_for_history(policy: Policy, extra: int) -> Policy:
-    """A policy that observes no history (env.obs_history 0), given `extra` more vector inputs
+    """A policy given `extra` more vector inputs (history over a policy without, the delay term)
     at the end of its vector part, where env.observation puts the history terms: zero weights
     for them in the first actor and critic layer, a unit normaliser (mean 0, variance 1), so
     the widened policy acts and values exactly as the given one until training uses them (a

@@ -247,9 +247,10 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     init_from = getattr(config, "init_from", "")
     if init_from:
         std = getattr(config, "init_from_std", 0.0)
+        env = getattr(config, "env", None)
         state = start_from_policy(state, init_from, trainer,
-                                  history=getattr(getattr(config, "env", None), "obs_history", 0),
-                                  std=std)
+                                  history=getattr(env, "obs_history", 0), std=std,
+                                  delay=getattr(env, "obs_action_delay", False))
         _say(f"initialised params and normaliser from {init_from}"
              + (f", exploration std {std}" if std else ""))
     if main:

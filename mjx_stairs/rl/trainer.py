@@ -339,19 +339,28 @@ def compiled_chunk(trainer: Trainer, state: TrainState) -> tuple[Callable, float
     return compiled, time.time() - t0
 
 
+def _appends(saved_env: dict, history: int, delay: bool) -> bool:
+    """Whether an observation of `history` steps (and the delay term) only appends terms to the
+    vector part of the one a policy of env config `saved_env` observed (env.observation's order:
+    ..., goal, history, action delay): the same history or none saved, the delay added."""
+    h, d = int(saved_env.get("obs_history", 0)), bool(saved_env.get("obs_action_delay", False))
+    return (h == history or (h == 0 and not d)) and d <= delay and (h, d) != (history, delay)
+
+
 def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
-                      history: int = 0, std: float = 0.0) -> TrainState:
+                      history: int = 0, std: float = 0.0, delay: bool = False) -> TrainState:
     """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
     starts from stage 1). The Adam moments, RNG and counters stay fresh. `std` > 0: the policy's
     exploration std (every action) is set to it, e.g. to explore again from a policy whose std
-    has shrunk (a fine-tune on new terrain; 0 keeps the saved one). An experiment with
-    `history` steps of observation history (env.obs_history) starts from a policy without
-    history through policy.widen_for_history: it acts as the saved policy at the start."""
+    has shrunk (a fine-tune on new terrain; 0 keeps the saved one). An experiment whose
+    observation adds terms at the end of the saved policy's vector part (`history` steps of
+    env.obs_history over a policy without history, the action delay term of
+    env.obs_action_delay) starts from it through policy.widen_for_history: it acts as the
+    saved policy at the start."""
     saved = policy_lib.load_policy(path)
     want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
     extra = int(state.normalizer["state"].mean.shape[0]) - saved.layout.obs_size
-    if history and extra > 0 and not (policy_lib.saved_config(saved, "env") or {}).get(
-            "obs_history"):
+    if extra > 0 and _appends(policy_lib.saved_config(saved, "env") or {}, history, delay):
         saved = policy_lib.widen_for_history(saved, extra)
     got = jax.tree_util.tree_map(jnp.shape, (saved.params, saved.normalizer))
     if want != got:

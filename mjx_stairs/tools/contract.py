@@ -24,6 +24,10 @@ TERMS = ("base_lin_vel", "base_ang_vel", "projected_gravity", "joint_pos", "join
 """The observation terms this reader knows how to measure."""
 HISTORY_TERMS = ("joint_pos_history", "action_history")
 """The terms of a policy with history (sidecar 'observation.history_steps' > 0): both or none."""
+DELAY_TERM = "action_delay"
+"""The term of a policy that observes its action delay (Measurement.action_delay_s, times the
+term's scale)."""
+OPTIONAL_TERMS = (*HISTORY_TERMS, DELAY_TERM)
 
 
 class ContractError(ValueError):
@@ -58,6 +62,7 @@ class Contract:
     history: int = 0  # policy steps of joint positions and actions the observation keeps
     hm_occlusion: int = 0  # height_map.occlusion.samples (0: none)
     hm_sensor_height: float = 0.0  # m, height_map.occlusion.sensor_height_m
+    delay_scale: float | None = None  # the action_delay term's scale (None: not observed)
     heading: str = "ahead"  # the waypoint's yaw: the route's heading at it ("ahead"), at the
     # robot's projection ("here"), or from the projection to the waypoint ("chord")
 
@@ -98,17 +103,18 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         raise ContractError(f"{w}: sidecar mismatch: its sha256 is not that of {onnx_path}")
     obs = _need(raw, "observation", w)
     size = int(_need(obs, "size", w))
-    slices, noise, at = {}, np.zeros(size), 0
+    slices, noise, at, scales = {}, np.zeros(size), 0, {}
     for e in _need(obs, "layout", w):
-        if e["name"] not in TERMS + HISTORY_TERMS:
+        if e["name"] not in TERMS + OPTIONAL_TERMS:
             raise ContractError(f"{w}: unknown observation term {e['name']!r}")
         if e["start"] != at:
             raise ContractError(f"{w}: observation term {e['name']!r} starts at {e['start']}, "
                                 f"not {at}")
         slices[e["name"]] = slice(e["start"], e["stop"])
+        scales[e["name"]] = float(e.get("scale", 1.0))
         noise[e["start"]:e["stop"]] = e.get("training_noise", 0.0)
         at = e["stop"]
-    if at != size or set(slices) - set(HISTORY_TERMS) != set(TERMS):
+    if at != size or set(slices) - set(OPTIONAL_TERMS) != set(TERMS):
         raise ContractError(f"{w}: the observation layout covers {at} of {size} floats with "
                             f"terms {sorted(slices)}")
     hm, joints, pd = _need(raw, "height_map", w), _need(raw, "joints", w), _need(raw, "pd", w)
@@ -126,6 +132,8 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
     if sizes != [len(names) * history] * (2 if history else 0):
         raise ContractError(f"{w}: history terms of {sizes} floats for history_steps {history} "
                             f"of {len(names)} joints")
+    if DELAY_TERM in slices and slices[DELAY_TERM].stop - slices[DELAY_TERM].start != 1:
+        raise ContractError(f"{w}: the {DELAY_TERM} term is one float")
     return Contract(
         raw=raw, obs_size=size, slices=slices, noise=noise, joint_names=names,
         sdk_index=np.asarray(joints["sdk_index"], np.int64),
@@ -138,6 +146,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         hm_xy=np.stack([gx.ravel(), gy.ravel()], -1), goal_mode=str(goal["mode"]),
         lookahead=float(goal["lookahead_m"] or 0.0), evaluation=dict(raw.get("evaluation", {})),
         history=history, heading=_heading(goal, w),
+        delay_scale=scales.get(DELAY_TERM) if DELAY_TERM in slices else None,
         hm_occlusion=int(occlusion.get("samples", 0)),
         hm_sensor_height=float(occlusion.get("sensor_height_m", 0.0)),
     )
@@ -205,6 +214,9 @@ class Measurement(NamedTuple):
     # of the H previous observations and [H, 12] the actions before last_action, newest first
     joint_pos_history: np.ndarray | None = None
     action_history: np.ndarray | None = None
+    # s, the robot's measured action delay (observation to PD target taking effect), for a
+    # policy that observes it (Contract.delay_scale)
+    action_delay_s: float = 0.0
 
 
 class History:
@@ -314,6 +326,8 @@ def observation(c: Contract, m: Measurement) -> np.ndarray:
         values["joint_pos_history"] = (np.asarray(m.joint_pos_history) - c.nominal).ravel()
         values["action_history"] = np.clip(m.action_history, -c.action_clip,
                                            c.action_clip).ravel()
+    if c.delay_scale is not None:
+        values[DELAY_TERM] = [c.delay_scale * m.action_delay_s]
     out = np.zeros(c.obs_size, np.float64)
     for name, sl in c.slices.items():
         out[sl] = values[name]

@@ -67,7 +67,7 @@ def _goal_description(cfg: EnvConfig, desc: str) -> str:
 def _layout(cfg: EnvConfig) -> list[dict[str, Any]]:
     hm, clips = cfg.height_map, _clip_ranges(cfg)
     entries, i = [], 0
-    for term in observation.terms(hm, cfg.obs_history):
+    for term in observation.of_config(cfg):
         desc = term.description
         if term.name == "goal":
             desc = _goal_description(cfg, desc)
@@ -123,8 +123,7 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         "calf_collision": cfg.robot.calf_collision,
         # every contact's solref time constant (robot and stairs); the MJCF's is MuJoCo's default
         "contact_timeconst_s": cfg.robot.contact_timeconst or solref.MJCF_TIMECONST_S,
-        "action_delay_s": list(r.action_delay_s) if r.enabled and r.action_delay_s[1] > 0
-        else [cfg.robot.action_delay_s] * 2,
+        "action_delay_s": _delay_range(cfg),
         "pushes": None if not (r.enabled and r.push_interval_s > 0) else {
             "interval_s": r.push_interval_s, "velocity_m_s": r.push_velocity,
             "on_stairs_only": r.push_on_stairs},
@@ -213,6 +212,12 @@ def versions() -> dict[str, str | None]:
     return out
 
 
+def _delay_range(cfg: EnvConfig) -> list[float]:
+    r = cfg.randomization
+    return (list(r.action_delay_s) if r.enabled and r.action_delay_s[1] > 0
+            else [cfg.robot.action_delay_s] * 2)
+
+
 def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
     """What a runner needs beside the graph, as a JSON-serialisable dict.
 
@@ -220,7 +225,7 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
     """
     cfg = env_config_from(saved_config(policy, "env"))
     layout, hm = policy.layout, cfg.height_map
-    n_vec = observation.n_vec(cfg.obs_history)
+    n_vec = observation.n_vec(cfg.obs_history, cfg.obs_action_delay)
     if layout.n_vec != n_vec or tuple(layout.map_shape) != (hm.size, hm.size):
         raise SidecarError(
             f"policy layout (vec {layout.n_vec}, map {tuple(layout.map_shape)}) is not the stair "
@@ -252,6 +257,11 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
                        "joint_pos (before nominal is subtracted: the encoder reading) and its "
                        "last_action in front of the kept histories and drop the oldest; at the "
                        "episode's start both are filled with the reset pose and zeros",
+            "action_delay": ("the 'action_delay' term: the robot's own action delay (from "
+                             "measuring an observation to its PD target taking effect), "
+                             "measured once, times the term's scale; training drew "
+                             f"{_delay_range(cfg)} s per robot") if cfg.obs_action_delay
+            else None,
         },
         "normalizer": None if norm is None else {
             "applied_in_graph": True, "clip": norm[2], "std_eps": STD_EPS,

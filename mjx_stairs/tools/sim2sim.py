@@ -150,7 +150,8 @@ class Sim:
             last_action=self.last_action,
             target=ct.goal_target(c, pos[:2], self.course.goal, self.course.route),
             terrain_z=terrain_z, joint_pos_history=self.history.joint_pos,
-            action_history=self.history.actions)
+            action_history=self.history.actions,
+            action_delay_s=self.delay * self.w.model.opt.timestep)  # as the robot measured it
 
     def observe(self) -> np.ndarray:
         """The observation [D] (with the training noise when `options.noise`)."""

@@ -26,12 +26,12 @@ N_VEC, MAP = observation.N_VEC, (21, 21)  # the default height map
 D = N_VEC + MAP[0] * MAP[1]
 
 
-def _policy_state(seed: int = 0, history: int = 0):
+def _policy_state(seed: int = 0, history: int = 0, delay: bool = False):
     """Params of the real architecture with non-trivial biases and an actor output of order 1,
     and a normaliser with varied means and stds (some tiny, so the clip is active); `history`:
-    the observation's steps of history (env.obs_history)."""
+    the observation's steps of history (env.obs_history); `delay`: the action delay term."""
     cfg = ExperimentConfig()
-    n_vec = observation.n_vec(history)
+    n_vec = observation.n_vec(history, delay)
     d = n_vec + MAP[0] * MAP[1]
     k = jax.random.split(jax.random.PRNGKey(seed), 8)
     params = networks.init_params(k[0], cfg.network, n_vec, MAP, 12)

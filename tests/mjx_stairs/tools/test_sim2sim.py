@@ -39,17 +39,19 @@ ROOT = Path(__file__).resolve().parents[3]
 STAGE2 = ROOT / "experiments" / "results" / "stage2_u" / "policy.npz"
 
 
-def _export(tmp, mode: str, history: int = 0,
-            occlusion: int = 0) -> tuple[Path, policy_lib.Policy]:
+def _export(tmp, mode: str, history: int = 0, occlusion: int = 0,
+            delay: bool = False) -> tuple[Path, policy_lib.Policy]:
     """A policy of the real architecture (goal `mode`, `history` steps of observation history,
-    `occlusion` samples of the height map's wall rule) exported to ONNX + sidecar."""
-    state, cfg = _policy_state(history=history)
+    `occlusion` samples of the height map's wall rule, `delay`: the action delay observed)
+    exported to ONNX + sidecar."""
+    state, cfg = _policy_state(history=history, delay=delay)
     path = tmp / "policy.npz"
     policy_lib.save_policy(path, state.params, state.normalizer, 7, cfg,
-                           networks.ObsLayout(observation.n_vec(history), MAP))
+                           networks.ObsLayout(observation.n_vec(history, delay), MAP))
     policy = policy_lib.load_policy(path)
     meta = copy.deepcopy(policy.metadata)
-    meta["config"]["env"].update(goal_mode=mode, waypoint_lookahead_m=1.0, obs_history=history)
+    meta["config"]["env"].update(goal_mode=mode, waypoint_lookahead_m=1.0, obs_history=history,
+                                 obs_action_delay=delay)
     meta["config"]["env"]["height_map"]["occlusion_samples"] = occlusion
     policy = policy._replace(metadata=meta)
     export.export_policy(policy, tmp / "policy.onnx")
@@ -244,6 +246,43 @@ def test_sim2sim_keeps_the_history_the_policy_acted_on(history_onnx, tmp_path):
     ct.sidecar_path(bad).write_text(json.dumps(side))
     with pytest.raises(ct.ContractError, match="history_steps 3"):
         ct.load_contract(bad)
+
+
+@pytest.fixture(scope="module")
+def delay_onnx(tmp_path_factory):
+    """A policy that observes 1 step of history and its action delay (env.obs_action_delay)."""
+    return _export(tmp_path_factory.mktemp("delay"), "final", history=1, delay=True)
+
+
+@pytest.mark.parametrize("latency_ms", [0.0, 10.0, 20.0])
+def test_the_delay_term_is_the_latency_the_runner_applies(delay_onnx, latency_ms):
+    """sim2sim measures the latency it applies (whole physics steps) and the sidecar's term reads
+    it as the training env reads its robot's drawn delay: 50 / s, after the history; the ONNX
+    action sees it."""
+    onnx_path, policy = delay_onnx
+    c = ct.load_contract(onnx_path)
+    cfg = evaluation_config(env_config_from(policy.metadata["config"]["env"]))
+    assert c.delay_scale == observation.DELAY_SCALE and cfg.obs_action_delay
+    assert c.slices["action_delay"] == slice(observation.n_vec(1, True) - 1,
+                                             observation.n_vec(1, True))
+    assert json.loads(ct.sidecar_path(onnx_path).read_text())["observation"]["action_delay"]
+    sim = _sim(onnx_path, latency_ms=latency_ms)
+    ours = sim.observe()
+    atlas = terrains.build_cell_atlas([("straight", "test", 0)], 1, resolution=0.1,
+                                      tile_size=10.0, border=1.0)
+    env = StairEnv(atlas, cfg)
+    qpos = np.concatenate([atlas.spawn[0][:2], [0.4, 1.0, 0, 0, 0], rb.NOMINAL_JOINT_POS])
+    info = {"tile": jnp.int32(0), "last_action": jnp.zeros(12),
+            **observation.history_start(1, jnp.zeros(12)),
+            "delay_steps": jnp.int32(round(latency_ms / 5.0))}
+    theirs = np.asarray(env.observe(jnp.asarray(qpos, jnp.float32), jnp.zeros(18), info)["state"])
+    sl = c.slices["action_delay"]
+    np.testing.assert_allclose(ours[sl], theirs[sl], atol=1e-6)
+    np.testing.assert_allclose(ours[sl], [latency_ms / 20.0], atol=1e-6)
+    onnx = ct.OnnxPolicy(onnx_path, c)
+    other = ours.copy()
+    other[sl] += 1.0
+    assert np.abs(onnx(other) - onnx(ours)).max() > 1e-4  # the network reads it
 
 
 def test_motors_in_sdk_order_give_the_same_torque_on_every_named_joint(onnx_file, tmp_path):
