@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import jax
+import numpy as np
 
 from mjx_stairs.rl import checkpoint
 from mjx_stairs.rl import policy as policy_lib
@@ -80,24 +81,80 @@ def save_state(path: str | Path, state: TrainState, config, layout: ObsLayout,
 
 
 
-def load_state(path: str | Path, trainer: Trainer) -> tuple[TrainState, dict]:
-    """Read a full checkpoint into the trainer's TrainState structure, placed on its mesh."""
+def load_state(path: str | Path, trainer: Trainer,
+               widen: Callable[[dict], bool] | None = None) -> tuple[TrainState, dict]:
+    """Read a full checkpoint into the trainer's TrainState structure, placed on its mesh.
+
+    ``widen(saved env config) -> bool``: whether a checkpoint whose observation is shorter than
+    the trainer's may be resumed with the new inputs at the end of its vector part (e.g. the
+    action delay term added, trainer.appends_terms): zero weights and Adam moments for them in
+    the first actor and critic layer, a unit normaliser, zeros in the stored actor
+    observation; the run goes on with its curriculum, optimiser and counters."""
     meta = checkpoint.load_metadata(path)
     if meta.get("kind") != "train_state":
         raise checkpoint.CheckpointError(f"{path}: not a train-state checkpoint")
-    if meta.get("env_format", "full") == "packed":
+    packed_format = meta.get("env_format", "full") == "packed"
+    template = trainer.template
+    if packed_format:
         pack, unpack = _packers(trainer.env)
-        packed_t = jax.eval_shape(pack, trainer.template.env_state)
-        host, meta = checkpoint.load(path, trainer.template._replace(env_state=packed_t))
+        template = template._replace(env_state=jax.eval_shape(pack, template.env_state))
+    extra = int(template.normalizer["state"].mean.shape[0]) - int(
+        meta.get("layout", {}).get("obs_size", 0))
+    saved_env = (meta.get("config") or {}).get("env") or {}
+    widened = extra > 0 and widen is not None and widen(saved_env)
+    if widened and not packed_format:
+        raise checkpoint.CheckpointError(f"{path}: only a packed checkpoint "
+                                         "(train.checkpoint_env='packed') resumes widened")
+    at_obs = int(meta["layout"]["n_vec"]) if widened else 0
+    host, meta = checkpoint.load(path, _resized(template, at_obs, extra, -1) if widened
+                                 else template)
+    if widened:
+        host = _resized(host, at_obs, extra, +1)
+    if packed_format:
         bat = batched(trainer.mesh)
-        packed = put_global(host.env_state, jax.tree_util.tree_map(lambda _: bat, packed_t))
+        packed = put_global(host.env_state,
+                            jax.tree_util.tree_map(lambda _: bat, template.env_state))
         env_state = jax.device_put(unpack(packed), trainer.sharding.env_state)
         state = put_global(host._replace(env_state=None),
                            trainer.sharding._replace(env_state=None))
         return state._replace(env_state=env_state), meta
-    host, meta = checkpoint.load(path, trainer.template)
     return put_global(host, trainer.sharding), meta
 
+
+def _resized(state: TrainState, at_obs: int, extra: int, sign: int) -> TrainState:
+    """The leaves of a (packed) TrainState that an observation `extra` floats longer at the end
+    of its vector part (index `at_obs` of the narrow one) changes: sign -1 their narrow shapes
+    (of a template of ShapeDtypeStructs), +1 narrow arrays widened (zero weights, moments,
+    means and stored observations; unit variances)."""
+    def rows(x, at, axis=0, fill=0.0):
+        if sign < 0:
+            shape = list(x.shape)
+            shape[axis] -= extra
+            return jax.ShapeDtypeStruct(tuple(shape), x.dtype)
+        pad = list(x.shape)
+        pad[axis] = extra
+        return np.concatenate([np.take(x, np.arange(at), axis), np.full(pad, fill, x.dtype),
+                               np.take(x, np.arange(at, x.shape[axis]), axis)], axis)
+
+    def first_layers(params):
+        out = dict(params)
+        for name in ("actor", "critic"):
+            w = params[name][0]["w"]
+            at = w.shape[0] - (extra if sign < 0 else 0)  # the vector part ends the features
+            out[name] = [{**params[name][0], "w": rows(w, at)}, *params[name][1:]]
+        return out
+
+    def stats(st):
+        var_one = float(np.maximum(st.count, 1.0)) if sign > 0 else 0.0  # m2 / count = 1
+        return st._replace(mean=rows(st.mean, at_obs), m2=rows(st.m2, at_obs, fill=var_one))
+
+    opt = state.opt_state
+    env = dict(state.env_state)
+    env["obs"] = rows(env["obs"], at_obs, axis=1)
+    return state._replace(
+        params=first_layers(state.params),
+        opt_state=opt._replace(mu=first_layers(opt.mu), nu=first_layers(opt.nu)),
+        normalizer={k: stats(v) for k, v in state.normalizer.items()}, env_state=env)
 
 
 def save_policy(path: str | Path, state: TrainState, config, layout: ObsLayout) -> None:

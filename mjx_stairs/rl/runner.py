@@ -40,6 +40,7 @@ from mjx_stairs.rl.sharding import put_global, to_host
 from mjx_stairs.rl.trainer import (
     Trainer,
     TrainState,
+    appends_terms,
     build_trainer,
     compiled_chunk,
     start_from_policy,
@@ -232,7 +233,10 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
         path = checkpoint.latest_checkpoint(ckpt_dir) if resume is True else Path(resume)
         if path is None:
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
-        state, meta = load_state(path, trainer)
+        env = getattr(config, "env", None)
+        hist, delay = getattr(env, "obs_history", 0), getattr(env, "obs_action_delay", False)
+        state, meta = load_state(path, trainer,
+                                 widen=lambda saved: appends_terms(saved, hist, delay))
         diff = _config_diff(meta.get("config", {}), config_dict(config))
         if diff and main:
             warnings.warn(f"resuming {path} with a changed config: {'; '.join(diff)}",

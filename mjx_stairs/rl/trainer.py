@@ -339,7 +339,7 @@ def compiled_chunk(trainer: Trainer, state: TrainState) -> tuple[Callable, float
     return compiled, time.time() - t0
 
 
-def _appends(saved_env: dict, history: int, delay: bool) -> bool:
+def appends_terms(saved_env: dict, history: int, delay: bool) -> bool:
     """Whether an observation of `history` steps (and the delay term) only appends terms to the
     vector part of the one a policy of env config `saved_env` observed (env.observation's order:
     ..., goal, history, action delay): the same history or none saved, the delay added."""
@@ -360,7 +360,7 @@ def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
     saved = policy_lib.load_policy(path)
     want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
     extra = int(state.normalizer["state"].mean.shape[0]) - saved.layout.obs_size
-    if extra > 0 and _appends(policy_lib.saved_config(saved, "env") or {}, history, delay):
+    if extra > 0 and appends_terms(policy_lib.saved_config(saved, "env") or {}, history, delay):
         saved = policy_lib.widen_for_history(saved, extra)
     got = jax.tree_util.tree_map(jnp.shape, (saved.params, saved.normalizer))
     if want != got:

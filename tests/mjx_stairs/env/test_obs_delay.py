@@ -66,7 +66,7 @@ def test_each_robot_observes_the_delay_it_drew(reset_states):
     ({"obs_action_delay": True}, 0, False, False),  # the delay taken away
 ])
 def test_a_fine_tune_widens_only_where_terms_are_appended(saved, history, delay, widens):
-    assert trainer._appends(saved, history, delay) is widens
+    assert trainer.appends_terms(saved, history, delay) is widens
 
 
 def test_a_published_policy_widened_for_the_delay_acts_as_before():

@@ -147,6 +147,44 @@ def test_chunk_save_load_chunk_is_bit_exact(tmp_path):
     assert _leaves_equal(m2, m2b)
 
 
+def test_a_packed_state_resumes_with_inputs_appended(tmp_path):
+    """A run resumed with more observation at the end of its vector part (env.obs_action_delay
+    over a run without it; checkpointer.load_state's widen): zero weights and Adam moments for
+    the new input, a unit normaliser for it, every other leaf as saved: it acts as it did, and
+    trains on."""
+    cfg = replace(MAP_CFG, train=replace(MAP_CFG.train, checkpoint_env="packed"))
+    narrow, wide = PointReach(map_shape=(5, 5)), PointReach(map_shape=(5, 5), told=1)
+    t1 = train_lib.build_trainer(cfg, narrow)
+    s1, _ = t1.chunk(t1.init(jax.random.PRNGKey(3)))
+    path = tmp_path / "state.npz"
+    checkpointer.save_state(path, s1, cfg, t1.layout, env=narrow)
+    t2 = train_lib.build_trainer(cfg, wide)
+    with pytest.raises(checkpoint.CheckpointError, match="does not match expected"):
+        checkpointer.load_state(path, t2)  # not allowed to widen: a clear error
+    s2, meta = checkpointer.load_state(path, t2, widen=lambda saved_env: True)
+    assert int(s2.iteration) == int(s1.iteration) == 2 and meta["layout"]["n_vec"] == 5
+    feat = SMALL_NET.latent_size + 5  # the new input's row in the first layers
+    for tree1, tree2 in ((s1.params, s2.params), (s1.opt_state.mu, s2.opt_state.mu),
+                         (s1.opt_state.nu, s2.opt_state.nu)):
+        for name in ("actor", "critic"):
+            w1, w2 = np.asarray(tree1[name][0]["w"]), np.asarray(tree2[name][0]["w"])
+            assert w2.shape[0] == w1.shape[0] + 1 and np.all(w2[feat] == 0.0)
+            np.testing.assert_array_equal(np.delete(w2, feat, 0), w1)
+    assert np.abs(np.asarray(s1.opt_state.mu["actor"][0]["w"])).max() > 0  # real moments
+    st1, st2 = s1.normalizer["state"], s2.normalizer["state"]
+    assert float(st2.mean[5]) == 0.0 and float(st2.m2[5] / st2.count) == pytest.approx(1.0)
+    np.testing.assert_array_equal(np.delete(np.asarray(st2.mean), 5), np.asarray(st1.mean))
+    rng = np.random.default_rng(0)
+    obs1 = rng.normal(size=(4, 30)).astype(np.float32)
+    obs2 = np.insert(obs1, 5, rng.uniform(0, 1, 4), axis=1)
+    np.testing.assert_allclose(
+        ppo.policy_mean(s2.params, s2.normalizer, jnp.asarray(obs2), SMALL_NET, t2.layout),
+        ppo.policy_mean(s1.params, s1.normalizer, jnp.asarray(obs1), SMALL_NET, t1.layout),
+        atol=1e-5)
+    s3, m3 = t2.chunk(s2)
+    assert int(s3.iteration) == 4 and np.isfinite(float(m3["loss/total"]))
+
+
 RUN_CFG = LearnerConfig(
     train=TrainConfig(num_envs=16, unroll_length=8, iterations_per_chunk=2),
     ppo=PPOConfig(num_minibatches=4, num_epochs=2),

@@ -25,12 +25,14 @@ class PointReach(Env):
         map_shape: tuple[int, ...] = (),
         obs_noise: float = 0.01,
         dt: float = 0.1,
+        told: int = 0,
     ):
         self.episode_length = episode_length
         self.map_shape = tuple(map_shape)
         self.obs_noise = obs_noise
         self.dt = dt
-        self.n_vec = 5
+        self.told = told  # inputs of 0.5 after the vector part's five (as env.obs_action_delay)
+        self.n_vec = 5 + told
 
     # --- brax Env interface -------------------------------------------------------------
     @property
@@ -120,7 +122,7 @@ class PointReach(Env):
     def _obs(self, phys: dict, rng: jax.Array) -> dict:
         rel = phys["goal"] - phys["pos"]
         time_left = 1.0 - phys["t"] / self.episode_length
-        vec = jnp.concatenate([rel, phys["vel"], time_left[None]])
+        vec = jnp.concatenate([rel, phys["vel"], time_left[None], jnp.full((self.told,), 0.5)])
         if self.map_shape:
             h, w = self.map_shape
             ys = jnp.linspace(-1.0, 1.0, h)
