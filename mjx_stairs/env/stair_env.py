@@ -94,7 +94,8 @@ class StairEnv(Env):
 
     @property
     def observation_size(self) -> dict[str, tuple[int, ...]]:
-        n = sum(t.size for t in observation.of_config(self.config))
+        c = self.config
+        n = observation.size(c.height_map, c.obs_history, c.obs_action_delay)
         return {"state": (n,), "privileged_state": (n,)}
 
     @property
