@@ -94,8 +94,7 @@ class StairEnv(Env):
 
     @property
     def observation_size(self) -> dict[str, tuple[int, ...]]:
-        c = self.config
-        n = observation.size(c.height_map, c.obs_history, c.obs_action_delay)
+        n = sum(t.size for t in observation.of_config(self.config))
         return {"state": (n,), "privileged_state": (n,)}
 
     @property
