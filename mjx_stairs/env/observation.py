@@ -127,6 +127,11 @@ def of_config(config) -> tuple[ObsTerm, ...]:
     return terms(config.height_map, config.obs_history, config.obs_action_delay)
 
 
+def n_vec_of(config) -> int:
+    """Length of the vector part of the observation an env of this EnvConfig builds."""
+    return n_vec(config.obs_history, config.obs_action_delay)
+
+
 def assemble(values: dict[str, jnp.ndarray], hm: HeightMapConfig, noise: NoiseConfig,
              rng: jax.Array | None, history: int = 0,
              delay: bool = False) -> dict[str, jnp.ndarray]:

@@ -75,7 +75,7 @@ def corrupt(obs: dict[str, jnp.ndarray], info: dict, rng: jax.Array | None,
     noise, hm = config.noise, config.height_map
     if rng is None or not noise.enabled or not (missing(noise) or "height_offset" in info):
         return obs
-    n = observation.n_vec(config.obs_history, config.obs_action_delay)
+    n = observation.n_vec_of(config)
     heights = obs["state"][n:]
     if "height_offset" in info:
         heights = heights + info["height_offset"]

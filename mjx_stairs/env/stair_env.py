@@ -94,7 +94,7 @@ class StairEnv(Env):
 
     @property
     def observation_size(self) -> dict[str, tuple[int, ...]]:
-        n = sum(t.size for t in observation.of_config(self.config))
+        n = observation.n_vec_of(self.config) + self.config.height_map.size ** 2
         return {"state": (n,), "privileged_state": (n,)}
 
     @property

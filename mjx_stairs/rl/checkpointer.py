@@ -15,6 +15,7 @@ process reads the file it resumes from (a shared filesystem, or the file copied 
 
 from __future__ import annotations
 
+import functools
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -106,10 +107,10 @@ def load_state(path: str | Path, trainer: Trainer,
         raise checkpoint.CheckpointError(f"{path}: only a packed checkpoint "
                                          "(train.checkpoint_env='packed') resumes widened")
     at_obs = int(meta["layout"]["n_vec"]) if widened else 0
-    host, meta = checkpoint.load(path, _resized(template, at_obs, extra, -1) if widened
+    host, meta = checkpoint.load(path, _resized(template, at_obs, extra, widen=False) if widened
                                  else template)
     if widened:
-        host = _resized(host, at_obs, extra, +1)
+        host = _resized(host, at_obs, extra, widen=True)
     if packed_format:
         bat = batched(trainer.mesh)
         packed = put_global(host.env_state,
@@ -121,40 +122,33 @@ def load_state(path: str | Path, trainer: Trainer,
     return put_global(host, trainer.sharding), meta
 
 
-def _resized(state: TrainState, at_obs: int, extra: int, sign: int) -> TrainState:
-    """The leaves of a (packed) TrainState that an observation `extra` floats longer at the end
-    of its vector part (index `at_obs` of the narrow one) changes: sign -1 their narrow shapes
-    (of a template of ShapeDtypeStructs), +1 narrow arrays widened (zero weights, moments,
-    means and stored observations; unit variances)."""
-    def rows(x, at, axis=0, fill=0.0):
-        if sign < 0:
-            shape = list(x.shape)
-            shape[axis] -= extra
-            return jax.ShapeDtypeStruct(tuple(shape), x.dtype)
-        pad = list(x.shape)
-        pad[axis] = extra
-        return np.concatenate([np.take(x, np.arange(at), axis), np.full(pad, fill, x.dtype),
-                               np.take(x, np.arange(at, x.shape[axis]), axis)], axis)
+def _resized(state: TrainState, at_obs: int, extra: int, widen: bool) -> TrainState:
+    """The leaves of a packed TrainState that an observation `extra` floats longer at the end of
+    its vector part (index `at_obs` of the narrow one) changes: narrow arrays widened (widen:
+    policy.append_inputs for the params and Adam moments, policy.unit_stats, zeros in the
+    stored observation), else the narrow shapes of a template of ShapeDtypeStructs."""
+    def narrow(x, axis=0):
+        shape = list(x.shape)
+        shape[axis] -= extra
+        return jax.ShapeDtypeStruct(tuple(shape), x.dtype)
 
-    def first_layers(params):
-        out = dict(params)
-        for name in ("actor", "critic"):
-            w = params[name][0]["w"]
-            at = w.shape[0] - (extra if sign < 0 else 0)  # the vector part ends the features
-            out[name] = [{**params[name][0], "w": rows(w, at)}, *params[name][1:]]
-        return out
+    def narrow_layers(params):
+        return {**params, **{n: [{**params[n][0], "w": narrow(params[n][0]["w"])},
+                                 *params[n][1:]] for n in ("actor", "critic")}}
 
-    def stats(st):
-        var_one = float(np.maximum(st.count, 1.0)) if sign > 0 else 0.0  # m2 / count = 1
-        return st._replace(mean=rows(st.mean, at_obs), m2=rows(st.m2, at_obs, fill=var_one))
-
+    if widen:
+        layers = functools.partial(policy_lib.append_inputs, extra=extra)
+        stats = functools.partial(policy_lib.unit_stats, at=at_obs, extra=extra)
+        obs = lambda x: np.insert(x, [at_obs] * extra, 0.0, axis=1)  # noqa: E731
+    else:
+        layers = narrow_layers
+        stats = lambda st: st._replace(mean=narrow(st.mean), m2=narrow(st.m2))  # noqa: E731
+        obs = functools.partial(narrow, axis=1)
     opt = state.opt_state
-    env = dict(state.env_state)
-    env["obs"] = rows(env["obs"], at_obs, axis=1)
     return state._replace(
-        params=first_layers(state.params),
-        opt_state=opt._replace(mu=first_layers(opt.mu), nu=first_layers(opt.nu)),
-        normalizer={k: stats(v) for k, v in state.normalizer.items()}, env_state=env)
+        params=layers(state.params), opt_state=opt._replace(mu=layers(opt.mu), nu=layers(opt.nu)),
+        normalizer={k: stats(v) for k, v in state.normalizer.items()},
+        env_state={**state.env_state, "obs": obs(state.env_state["obs"])})
 
 
 def save_policy(path: str | Path, state: TrainState, config, layout: ObsLayout) -> None:

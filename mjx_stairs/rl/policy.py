@@ -109,6 +109,25 @@ def load_policy(path: str | Path) -> Policy:
     return Policy(tree["params"], tree["normalizer"], net_cfg, layout, a, meta)
 
 
+def append_inputs(params: networks.Params, extra: int) -> networks.Params:
+    """Actor-critic params, or Adam moments shaped like them, with `extra` more inputs at the end
+    of the first actor and critic layer's (the vector part ends the features): zero rows."""
+    out = dict(params)
+    for name in ("actor", "critic"):
+        first = params[name][0]
+        w = first["w"]
+        out[name] = [{**first, "w": jnp.concatenate([w, jnp.zeros((extra, w.shape[1]), w.dtype)])},
+                     *params[name][1:]]
+    return out
+
+
+def unit_stats(st: normalizer.RunningStats, at: int, extra: int) -> normalizer.RunningStats:
+    """Running statistics with `extra` more entries at index `at`: mean 0, variance 1."""
+    ones = jnp.full((extra,), jnp.maximum(st.count, 1.0), st.m2.dtype)  # m2 / count = 1
+    return normalizer.RunningStats(st.count, jnp.insert(st.mean, at, jnp.zeros((extra,))),
+                                   jnp.insert(st.m2, at, ones))
+
+
 def widen_for_history(policy: Policy, extra: int) -> Policy:
     """A policy given `extra` more vector inputs (history over a policy without, the delay term)
     at the end of its vector part, where env.observation puts the history terms: zero weights
@@ -116,24 +135,10 @@ def widen_for_history(policy: Policy, extra: int) -> Policy:
     the widened policy acts and values exactly as the given one until training uses them (a
     history policy fine-tuned from a published one; trainer.start_from_policy)."""
     at_obs = policy.layout.n_vec
-    at_feat = (policy.network.latent_size if policy.layout.map_shape else 0) + at_obs
-    params = dict(policy.params)
-    for name in ("actor", "critic"):
-        first = dict(params[name][0])
-        w = first["w"]
-        first["w"] = jnp.concatenate([w[:at_feat], jnp.zeros((extra, w.shape[1]), w.dtype),
-                                      w[at_feat:]])
-        params[name] = [first, *params[name][1:]]
-
-    def stats(st: normalizer.RunningStats) -> normalizer.RunningStats:
-        ones = jnp.full((extra,), jnp.maximum(st.count, 1.0), st.m2.dtype)  # m2 / count = 1
-        return normalizer.RunningStats(
-            st.count, jnp.concatenate([st.mean[:at_obs], jnp.zeros((extra,)), st.mean[at_obs:]]),
-            jnp.concatenate([st.m2[:at_obs], ones, st.m2[at_obs:]]))
-
-    norm = {k: stats(v) for k, v in policy.normalizer.items()}
+    norm = {k: unit_stats(v, at_obs, extra) for k, v in policy.normalizer.items()}
     layout = ObsLayout(at_obs + extra, policy.layout.map_shape)
-    return policy._replace(params=params, normalizer=norm, layout=layout)
+    return policy._replace(params=append_inputs(policy.params, extra), normalizer=norm,
+                           layout=layout)
 
 
 def policy_action(policy: Policy, obs: jax.Array, rng: jax.Array | None = None) -> jax.Array:

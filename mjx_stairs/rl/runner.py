@@ -228,13 +228,13 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     """The state to train from: resumed from a checkpoint, or fresh (params and normaliser from
     ``config.init_from`` when set); a fresh run writes config.json (process 0)."""
     main = distributed.is_main()
+    env = getattr(config, "env", None)  # the observation's layout (rl knows no env config)
+    hist, delay = getattr(env, "obs_history", 0), getattr(env, "obs_action_delay", False)
     if resume:
         ckpt_dir = run_dir / "checkpoints"
         path = checkpoint.latest_checkpoint(ckpt_dir) if resume is True else Path(resume)
         if path is None:
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
-        env = getattr(config, "env", None)
-        hist, delay = getattr(env, "obs_history", 0), getattr(env, "obs_action_delay", False)
         state, meta = load_state(path, trainer,
                                  widen=lambda saved: appends_terms(saved, hist, delay))
         diff = _config_diff(meta.get("config", {}), config_dict(config))
@@ -251,10 +251,8 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     init_from = getattr(config, "init_from", "")
     if init_from:
         std = getattr(config, "init_from_std", 0.0)
-        env = getattr(config, "env", None)
-        state = start_from_policy(state, init_from, trainer,
-                                  history=getattr(env, "obs_history", 0), std=std,
-                                  delay=getattr(env, "obs_action_delay", False))
+        state = start_from_policy(state, init_from, trainer, history=hist, std=std,
+                                  delay=delay)
         _say(f"initialised params and normaliser from {init_from}"
              + (f", exploration std {std}" if std else ""))
     if main:

@@ -103,7 +103,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         raise ContractError(f"{w}: sidecar mismatch: its sha256 is not that of {onnx_path}")
     obs = _need(raw, "observation", w)
     size = int(_need(obs, "size", w))
-    slices, noise, at, scales = {}, np.zeros(size), 0, {}
+    slices, noise, at, delay_scale = {}, np.zeros(size), 0, None
     for e in _need(obs, "layout", w):
         if e["name"] not in TERMS + OPTIONAL_TERMS:
             raise ContractError(f"{w}: unknown observation term {e['name']!r}")
@@ -111,7 +111,8 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
             raise ContractError(f"{w}: observation term {e['name']!r} starts at {e['start']}, "
                                 f"not {at}")
         slices[e["name"]] = slice(e["start"], e["stop"])
-        scales[e["name"]] = float(e.get("scale", 1.0))
+        if e["name"] == DELAY_TERM:
+            delay_scale = float(e.get("scale", 1.0))
         noise[e["start"]:e["stop"]] = e.get("training_noise", 0.0)
         at = e["stop"]
     if at != size or set(slices) - set(OPTIONAL_TERMS) != set(TERMS):
@@ -146,7 +147,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         hm_xy=np.stack([gx.ravel(), gy.ravel()], -1), goal_mode=str(goal["mode"]),
         lookahead=float(goal["lookahead_m"] or 0.0), evaluation=dict(raw.get("evaluation", {})),
         history=history, heading=_heading(goal, w),
-        delay_scale=scales.get(DELAY_TERM) if DELAY_TERM in slices else None,
+        delay_scale=delay_scale,
         hm_occlusion=int(occlusion.get("samples", 0)),
         hm_sensor_height=float(occlusion.get("sensor_height_m", 0.0)),
     )

@@ -225,7 +225,7 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
     """
     cfg = env_config_from(saved_config(policy, "env"))
     layout, hm = policy.layout, cfg.height_map
-    n_vec = observation.n_vec(cfg.obs_history, cfg.obs_action_delay)
+    n_vec = observation.n_vec_of(cfg)
     if layout.n_vec != n_vec or tuple(layout.map_shape) != (hm.size, hm.size):
         raise SidecarError(
             f"policy layout (vec {layout.n_vec}, map {tuple(layout.map_shape)}) is not the stair "
