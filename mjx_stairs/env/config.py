@@ -94,6 +94,9 @@ class RandomizationConfig:
     # N m s/rad, uniform per robot, the joints' passive damping (the MJCF's 0.1 when ()); the
     # Go2 description has 2
     joint_damping: tuple[float, ...] = ()
+    # how joint_damping is drawn: "uniform", or "log" (uniform in its logarithm: as many robots
+    # in [0.1, 0.45] as in [0.45, 2], where the delay costs most; lo > 0)
+    joint_damping_draw: str = "uniform"
     # s, uniform per robot in whole physics steps: a new PD target takes effect this much
     # later (the previous one holds until then); at most one policy step
     action_delay_s: tuple[float, float] = (0.0, 0.0)
@@ -103,6 +106,10 @@ class RandomizationConfig:
         _require("env.randomization", [
             ("joint_damping", list(d), not d or (len(d) == 2 and 0.0 <= d[0] <= d[1]),
              "() or [lo, hi] with 0 <= lo <= hi"),
+            ("joint_damping_draw", self.joint_damping_draw,
+             self.joint_damping_draw in ("uniform", "log"), "'uniform' or 'log'"),
+            ("joint_damping", list(d), self.joint_damping_draw == "uniform" or not d or d[0] > 0,
+             "lo > 0 for joint_damping_draw = 'log'"),
             ("action_delay_s", list(lag), 0.0 <= lag[0] <= lag[1], "[lo, hi], 0 <= lo <= hi")])
 
 

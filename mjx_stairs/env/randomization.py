@@ -42,7 +42,9 @@ def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
             "kd_scale": u(keys[5], r.kd_scale),
         }
         if r.joint_damping:
-            out["joint_damping"] = u(jax.random.fold_in(keys[0], 1), r.joint_damping)
+            k = jax.random.fold_in(keys[0], 1)
+            out["joint_damping"] = (u(k, r.joint_damping) if r.joint_damping_draw == "uniform"
+                                    else jnp.exp(u(k, jnp.log(jnp.asarray(r.joint_damping)))))
         lo, hi = (int(round(s / config.robot.timestep)) for s in r.action_delay_s)
         if hi > 0:
             out["delay_steps"] = jax.random.randint(jax.random.fold_in(keys[0], 2), (), lo,

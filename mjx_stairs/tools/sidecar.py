@@ -118,6 +118,7 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
     return {
         "joint_damping_nms_rad": list(r.joint_damping) if r.enabled and r.joint_damping
         else [damping, damping],
+        "joint_damping_draw": r.joint_damping_draw if r.enabled and r.joint_damping else "fixed",
         "joint_damping_integration": "implicit" if cfg.robot.implicit_damping else "explicit",
         "head_collision": cfg.robot.head_collision,
         "calf_collision": cfg.robot.calf_collision,

@@ -158,6 +158,30 @@ def test_a_fixed_delay_is_the_robots_own_in_evaluation_and_training():
         assert "\n" not in str(e.value)
 
 
+def test_a_log_draw_puts_half_the_robots_under_the_geometric_mean_of_the_damping():
+    """randomization.joint_damping_draw = "log": uniform in log(damping), so half of 2000 draws
+    over [0.1, 2] fall under sqrt(0.2) = 0.447 (the uniform draw puts 18 % there), every draw
+    inside the range; "log" with lo = 0 or an unknown draw: a one-line error naming the key."""
+    from mjx_stairs.env.config import ConfigError
+
+    keys = jax.random.split(jax.random.PRNGKey(5), 2000)
+    under = {}
+    for how in ("uniform", "log"):
+        cfg = env_config_from(None, ["randomization.joint_damping=[0.1, 2.0]",
+                                     f"randomization.joint_damping_draw={how}"])
+        d = np.asarray(jax.vmap(lambda k, c=cfg: dr.draw(jax.random.split(k, 6), c)[
+            "joint_damping"])(keys))
+        assert d.min() >= 0.1 - 1e-6 and d.max() <= 2.0 + 1e-6
+        under[how] = float((d < np.sqrt(0.2)).mean())
+    assert abs(under["log"] - 0.5) < 0.04 and abs(under["uniform"] - 0.182) < 0.03, under
+    for bad, key in ((["randomization.joint_damping=[0.0, 2.0]",
+                       "randomization.joint_damping_draw=log"], "joint_damping"),
+                     (["randomization.joint_damping_draw=loguniform"], "joint_damping_draw")):
+        with pytest.raises(ConfigError, match=f"randomization.{key}'") as e:
+            env_config_from(None, bad)
+        assert "\n" not in str(e.value)
+
+
 def test_damping_is_the_robots_own_and_slows_its_joints(env, rollout, actuate):
     data, info = _standing(env, rollout, qvel_joints=4.0)
     vj = env.robot.ids.qvel_joints

@@ -191,6 +191,7 @@ def test_the_sidecar_says_what_the_policy_withstands(trained):
     side = sidecar(load_policy(trained / "policy.npz"))
     t = side["training"]
     assert t["joint_damping_nms_rad"] == [0.1, 2.0] and t["action_delay_s"] == [0.0, 0.02]
+    assert t["joint_damping_draw"] == "uniform"
     assert t["joint_damping_integration"] == "implicit" and t["head_collision"]
     assert t["pushes"]["on_stairs_only"] and t["route"]["lateral_fraction_of_width"] == 0.33
     assert t["height_map"]["missing_under_body"] == 0.3
