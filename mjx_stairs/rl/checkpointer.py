@@ -29,7 +29,7 @@ from mjx_stairs.rl.distributed import is_main
 from mjx_stairs.rl.networks import ObsLayout
 from mjx_stairs.rl.policy import config_dict, layout_dict
 from mjx_stairs.rl.sharding import batched, put_global, to_host
-from mjx_stairs.rl.trainer import Trainer, TrainState
+from mjx_stairs.rl.trainer import Trainer, TrainState, new_inputs_seen
 
 _PACKERS: dict[int, tuple[Any, Callable, Callable]] = {}
 
@@ -89,8 +89,9 @@ def load_state(path: str | Path, trainer: Trainer,
     ``widen(saved env config) -> bool``: whether a checkpoint whose observation is shorter than
     the trainer's may be resumed with the new inputs at the end of its vector part (e.g. the
     action delay term added, trainer.appends_terms): zero weights and Adam moments for them in
-    the first actor and critic layer, a unit normaliser, zeros in the stored actor
-    observation; the run goes on with its curriculum, optimiser and counters."""
+    the first actor and critic layer, their normaliser entries from 256 fresh resets of the
+    trainer's env (trainer.new_inputs_seen), zeros in the stored actor observation; the run
+    goes on with its curriculum, optimiser and counters."""
     meta = checkpoint.load_metadata(path)
     if meta.get("kind") != "train_state":
         raise checkpoint.CheckpointError(f"{path}: not a train-state checkpoint")
@@ -110,7 +111,8 @@ def load_state(path: str | Path, trainer: Trainer,
     host, meta = checkpoint.load(path, _resized(template, at_obs, extra, widen=False) if widened
                                  else template)
     if widened:
-        host = _resized(host, at_obs, extra, widen=True)
+        host = _resized(host, at_obs, extra, widen=True,
+                        seen=new_inputs_seen(trainer.env, at_obs, extra))
     if packed_format:
         bat = batched(trainer.mesh)
         packed = put_global(host.env_state,
@@ -122,11 +124,13 @@ def load_state(path: str | Path, trainer: Trainer,
     return put_global(host, trainer.sharding), meta
 
 
-def _resized(state: TrainState, at_obs: int, extra: int, widen: bool) -> TrainState:
+def _resized(state: TrainState, at_obs: int, extra: int, widen: bool,
+             seen: dict | None = None) -> TrainState:
     """The leaves of a packed TrainState that an observation `extra` floats longer at the end of
     its vector part (index `at_obs` of the narrow one) changes: narrow arrays widened (widen:
-    policy.append_inputs for the params and Adam moments, policy.unit_stats, zeros in the
-    stored observation), else the narrow shapes of a template of ShapeDtypeStructs."""
+    policy.append_inputs for the params and Adam moments, policy.unit_stats from the new inputs
+    `seen` per stream, zeros in the stored observation), else the narrow shapes of a template
+    of ShapeDtypeStructs."""
     def narrow(x, axis=0):
         shape = list(x.shape)
         shape[axis] -= extra
@@ -138,16 +142,16 @@ def _resized(state: TrainState, at_obs: int, extra: int, widen: bool) -> TrainSt
 
     if widen:
         layers = functools.partial(policy_lib.append_inputs, extra=extra)
-        stats = functools.partial(policy_lib.unit_stats, at=at_obs, extra=extra)
+        stats = lambda k, st: policy_lib.unit_stats(st, at_obs, extra, seen[k])  # noqa: E731
         obs = lambda x: np.insert(x, [at_obs] * extra, 0.0, axis=1)  # noqa: E731
     else:
         layers = narrow_layers
-        stats = lambda st: st._replace(mean=narrow(st.mean), m2=narrow(st.m2))  # noqa: E731
+        stats = lambda k, st: st._replace(mean=narrow(st.mean), m2=narrow(st.m2))  # noqa: E731
         obs = functools.partial(narrow, axis=1)
     opt = state.opt_state
     return state._replace(
         params=layers(state.params), opt_state=opt._replace(mu=layers(opt.mu), nu=layers(opt.nu)),
-        normalizer={k: stats(v) for k, v in state.normalizer.items()},
+        normalizer={k: stats(k, v) for k, v in state.normalizer.items()},
         env_state={**state.env_state, "obs": obs(state.env_state["obs"])})
 
 

@@ -121,21 +121,35 @@ def append_inputs(params: networks.Params, extra: int) -> networks.Params:
     return out
 
 
-def unit_stats(st: normalizer.RunningStats, at: int, extra: int) -> normalizer.RunningStats:
-    """Running statistics with `extra` more entries at index `at`: mean 0, variance 1."""
-    ones = jnp.full((extra,), jnp.maximum(st.count, 1.0), st.m2.dtype)  # m2 / count = 1
-    return normalizer.RunningStats(st.count, jnp.insert(st.mean, at, jnp.zeros((extra,))),
-                                   jnp.insert(st.m2, at, ones))
+def unit_stats(st: normalizer.RunningStats, at: int, extra: int,
+               seen: jax.Array | None = None) -> normalizer.RunningStats:
+    """Running statistics with `extra` more entries at index `at`, under the saved count: mean
+    0, variance 1; or, given `seen` [N, extra] (the new inputs as the env gives them, e.g. over
+    fresh resets), their mean and variance (1 where constant), so that the new inputs are scaled
+    as the others from the first step: the running update barely moves entries under a count of
+    ~1e8 (the delay term of generalist_from_stage1_mix_told, values 0-1, read mean 0.06 and std
+    0.96 after 400 iterations under a unit start)."""
+    mean, var = jnp.zeros((extra,)), jnp.ones((extra,))
+    if seen is not None:
+        seen = jnp.asarray(seen, jnp.float32).reshape(-1, extra)
+        mean, var = seen.mean(0), seen.var(0)
+        var = jnp.where(var > 1e-8, var, 1.0)
+    count = jnp.maximum(st.count, 1.0)
+    return normalizer.RunningStats(st.count, jnp.insert(st.mean, at, mean.astype(st.mean.dtype)),
+                                   jnp.insert(st.m2, at, (var * count).astype(st.m2.dtype)))
 
 
-def widen_for_history(policy: Policy, extra: int) -> Policy:
+def widen_for_history(policy: Policy, extra: int,
+                      seen: dict[str, jax.Array] | None = None) -> Policy:
     """A policy given `extra` more vector inputs (history over a policy without, the delay term)
     at the end of its vector part, where env.observation puts the history terms: zero weights
-    for them in the first actor and critic layer, a unit normaliser (mean 0, variance 1), so
-    the widened policy acts and values exactly as the given one until training uses them (a
-    history policy fine-tuned from a published one; trainer.start_from_policy)."""
+    for them in the first actor and critic layer, a unit normaliser (mean 0, variance 1; or
+    per stream the statistics of `seen`, see unit_stats), so the widened policy acts and values
+    exactly as the given one until training uses them (a history policy fine-tuned from a
+    published one; trainer.start_from_policy)."""
     at_obs = policy.layout.n_vec
-    norm = {k: unit_stats(v, at_obs, extra) for k, v in policy.normalizer.items()}
+    norm = {k: unit_stats(v, at_obs, extra, None if seen is None else seen[k])
+            for k, v in policy.normalizer.items()}
     layout = ObsLayout(at_obs + extra, policy.layout.map_shape)
     return policy._replace(params=append_inputs(policy.params, extra), normalizer=norm,
                            layout=layout)

@@ -347,6 +347,13 @@ def appends_terms(saved_env: dict, history: int, delay: bool) -> bool:
     return (h == history or (h == 0 and not d)) and d <= delay and (h, d) != (history, delay)
 
 
+def new_inputs_seen(env, at: int, extra: int, n: int = 256) -> dict[str, jax.Array]:
+    """The `extra` inputs at index `at` of each observation stream over `n` fresh resets of
+    `env`: what a widened normaliser starts from (policy.unit_stats)."""
+    obs = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), n)).obs
+    return {k: obs[k][:, at:at + extra] for k in OBS_KEYS}
+
+
 def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
                       history: int = 0, std: float = 0.0, delay: bool = False) -> TrainState:
     """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
@@ -361,7 +368,8 @@ def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
     want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
     extra = int(state.normalizer["state"].mean.shape[0]) - saved.layout.obs_size
     if extra > 0 and appends_terms(policy_lib.saved_config(saved, "env") or {}, history, delay):
-        saved = policy_lib.widen_for_history(saved, extra)
+        saved = policy_lib.widen_for_history(
+            saved, extra, new_inputs_seen(trainer.env, saved.layout.n_vec, extra))
     got = jax.tree_util.tree_map(jnp.shape, (saved.params, saved.normalizer))
     if want != got:
         raise checkpoint.CheckpointError(

@@ -150,8 +150,8 @@ def test_chunk_save_load_chunk_is_bit_exact(tmp_path):
 def test_a_packed_state_resumes_with_inputs_appended(tmp_path):
     """A run resumed with more observation at the end of its vector part (env.obs_action_delay
     over a run without it; checkpointer.load_state's widen): zero weights and Adam moments for
-    the new input, a unit normaliser for it, every other leaf as saved: it acts as it did, and
-    trains on."""
+    the new input, its normaliser entry from the env's resets (not a unit one, which the saved
+    count would hold for long), every other leaf as saved: it acts as it did, and trains on."""
     cfg = replace(MAP_CFG, train=replace(MAP_CFG.train, checkpoint_env="packed"))
     narrow, wide = PointReach(map_shape=(5, 5)), PointReach(map_shape=(5, 5), told=1)
     t1 = train_lib.build_trainer(cfg, narrow)
@@ -172,7 +172,11 @@ def test_a_packed_state_resumes_with_inputs_appended(tmp_path):
             np.testing.assert_array_equal(np.delete(w2, feat, 0), w1)
     assert np.abs(np.asarray(s1.opt_state.mu["actor"][0]["w"])).max() > 0  # real moments
     st1, st2 = s1.normalizer["state"], s2.normalizer["state"]
-    assert float(st2.mean[5]) == 0.0 and float(st2.m2[5] / st2.count) == pytest.approx(1.0)
+    seen = np.asarray(jax.vmap(wide.reset)(jax.random.split(jax.random.PRNGKey(0), 256)).obs[
+        "state"])[:, 5]
+    assert seen.std() > 0.05  # one value per episode, as the delay
+    assert float(st2.mean[5]) == pytest.approx(seen.mean(), abs=1e-5)
+    assert float(st2.m2[5] / st2.count) == pytest.approx(seen.var(), rel=1e-3)
     np.testing.assert_array_equal(np.delete(np.asarray(st2.mean), 5), np.asarray(st1.mean))
     rng = np.random.default_rng(0)
     obs1 = rng.normal(size=(4, 30)).astype(np.float32)
@@ -265,6 +269,25 @@ def test_a_run_started_from_a_policy_keeps_or_resets_its_std(tmp_path):
     assert not np.allclose(np.asarray(published.params["log_std"]), np.log(0.3))
     others = lambda p: {k: v for k, v in p.items() if k != "log_std"}  # noqa: E731
     assert _leaves_equal(others(reset.params), others(published.params))
+
+
+def test_a_policy_started_with_an_input_appended_scales_it_as_the_env_gives_it(tmp_path):
+    """init_from into an observation with a term appended (env.obs_action_delay over a policy
+    without it): zero weights for the new input, and its normaliser entry the mean and variance
+    of 256 fresh resets of the env, the others the published policy's."""
+    first = runner.run(_run_cfg(tmp_path / "a", total_iterations=2), TOY)
+    published = policy_lib.load_policy(first.run_dir / "policy.npz")
+    wide = PointReach(told=1)
+    trainer = train_lib.build_trainer(_run_cfg(tmp_path / "b"), wide)
+    state = train_lib.start_from_policy(trainer.init(jax.random.PRNGKey(3)),
+                                        first.run_dir / "policy.npz", trainer, delay=True)
+    assert np.all(np.asarray(state.params["actor"][0]["w"])[5] == 0.0)
+    seen = np.asarray(jax.vmap(wide.reset)(jax.random.split(jax.random.PRNGKey(0), 256)).obs[
+        "privileged_state"])[:, 5]
+    st, old = state.normalizer["privileged_state"], published.normalizer["privileged_state"]
+    assert float(st.mean[5]) == pytest.approx(seen.mean(), abs=1e-5) and seen.std() > 0.05
+    assert float(st.m2[5] / st.count) == pytest.approx(seen.var(), rel=1e-3)
+    np.testing.assert_array_equal(np.delete(np.asarray(st.mean), 5), np.asarray(old.mean))
 
 
 def test_resume_under_another_seed_draws_another_stream(tmp_path):

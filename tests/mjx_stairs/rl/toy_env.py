@@ -31,7 +31,9 @@ class PointReach(Env):
         self.map_shape = tuple(map_shape)
         self.obs_noise = obs_noise
         self.dt = dt
-        self.told = told  # inputs of 0.5 after the vector part's five (as env.obs_action_delay)
+        # inputs after the vector part's five, one value per episode in [0.25, 0.75] (as
+        # env.obs_action_delay gives each robot's drawn delay)
+        self.told = told
         self.n_vec = 5 + told
 
     # --- brax Env interface -------------------------------------------------------------
@@ -122,7 +124,8 @@ class PointReach(Env):
     def _obs(self, phys: dict, rng: jax.Array) -> dict:
         rel = phys["goal"] - phys["pos"]
         time_left = 1.0 - phys["t"] / self.episode_length
-        vec = jnp.concatenate([rel, phys["vel"], time_left[None], jnp.full((self.told,), 0.5)])
+        told = jnp.full((self.told,), 0.5 + 0.125 * (phys["goal"][0] + phys["pos"][0]))
+        vec = jnp.concatenate([rel, phys["vel"], time_left[None], told])
         if self.map_shape:
             h, w = self.map_shape
             ys = jnp.linspace(-1.0, 1.0, h)
