@@ -127,7 +127,7 @@ def unit_stats(st: normalizer.RunningStats, at: int, extra: int,
     0, variance 1; or, given `seen` [N, extra] (the new inputs as the env gives them, e.g. over
     fresh resets), their mean and variance (1 where constant), so that the new inputs are scaled
     as the others from the first step: the running update barely moves entries under a count of
-    ~1e8 (the delay term of generalist_from_stage1_mix_told, values 0-1, read mean 0.06 and std
+    ~3e8 (the delay term of generalist_from_stage1_mix_told, values 0-1, read mean 0.06 and std
     0.96 after 400 iterations under a unit start)."""
     mean, var = jnp.zeros((extra,)), jnp.ones((extra,))
     if seen is not None:
