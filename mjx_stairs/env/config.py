@@ -94,8 +94,8 @@ class RandomizationConfig:
     # N m s/rad, uniform per robot, the joints' passive damping (the MJCF's 0.1 when ()); the
     # Go2 description has 2
     joint_damping: tuple[float, ...] = ()
-    # how joint_damping is drawn: "uniform", or "log" (uniform in its logarithm: as many robots
-    # in [0.1, 0.45] as in [0.45, 2], where the delay costs most; lo > 0)
+    # how joint_damping is drawn: "uniform", or "log" (uniform in its logarithm, lo > 0: over
+    # [0.1, 2] as many robots under 0.45 as above, where the delay costs most)
     joint_damping_draw: str = "uniform"
     # s, uniform per robot in whole physics steps: a new PD target takes effect this much
     # later (the previous one holds until then); at most one policy step

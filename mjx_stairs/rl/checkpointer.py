@@ -128,7 +128,7 @@ def _resized(state: TrainState, at_obs: int, extra: int, widen: bool,
              seen: dict | None = None) -> TrainState:
     """The leaves of a packed TrainState that an observation `extra` floats longer at the end of
     its vector part (index `at_obs` of the narrow one) changes: narrow arrays widened (widen:
-    policy.append_inputs for the params and Adam moments, policy.unit_stats from the new inputs
+    policy.append_inputs for the params and Adam moments, policy.appended_stats from the new inputs
     `seen` per stream, zeros in the stored observation), else the narrow shapes of a template
     of ShapeDtypeStructs."""
     def narrow(x, axis=0):
@@ -142,7 +142,7 @@ def _resized(state: TrainState, at_obs: int, extra: int, widen: bool,
 
     if widen:
         layers = functools.partial(policy_lib.append_inputs, extra=extra)
-        stats = lambda k, st: policy_lib.unit_stats(st, at_obs, extra, seen[k])  # noqa: E731
+        stats = lambda k, st: policy_lib.appended_stats(st, at_obs, extra, seen[k])  # noqa: E731
         obs = lambda x: np.insert(x, [at_obs] * extra, 0.0, axis=1)  # noqa: E731
     else:
         layers = narrow_layers

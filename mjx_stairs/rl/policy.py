@@ -121,7 +121,7 @@ def append_inputs(params: networks.Params, extra: int) -> networks.Params:
     return out
 
 
-def unit_stats(st: normalizer.RunningStats, at: int, extra: int,
+def appended_stats(st: normalizer.RunningStats, at: int, extra: int,
                seen: jax.Array | None = None) -> normalizer.RunningStats:
     """Running statistics with `extra` more entries at index `at`, under the saved count: mean
     0, variance 1; or, given `seen` [N, extra] (the new inputs as the env gives them, e.g. over
@@ -144,11 +144,11 @@ def widen_for_history(policy: Policy, extra: int,
     """A policy given `extra` more vector inputs (history over a policy without, the delay term)
     at the end of its vector part, where env.observation puts the history terms: zero weights
     for them in the first actor and critic layer, a unit normaliser (mean 0, variance 1; or
-    per stream the statistics of `seen`, see unit_stats), so the widened policy acts and values
+    per stream the statistics of `seen`, see appended_stats), so the widened policy acts and values
     exactly as the given one until training uses them (a history policy fine-tuned from a
     published one; trainer.start_from_policy)."""
     at_obs = policy.layout.n_vec
-    norm = {k: unit_stats(v, at_obs, extra, None if seen is None else seen[k])
+    norm = {k: appended_stats(v, at_obs, extra, None if seen is None else seen[k])
             for k, v in policy.normalizer.items()}
     layout = ObsLayout(at_obs + extra, policy.layout.map_shape)
     return policy._replace(params=append_inputs(policy.params, extra), normalizer=norm,

@@ -349,7 +349,7 @@ def appends_terms(saved_env: dict, history: int, delay: bool) -> bool:
 
 def new_inputs_seen(env, at: int, extra: int, n: int = 256) -> dict[str, jax.Array]:
     """The `extra` inputs at index `at` of each observation stream over `n` fresh resets of
-    `env`: what a widened normaliser starts from (policy.unit_stats)."""
+    `env`: what a widened normaliser starts from (policy.appended_stats)."""
     obs = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), n)).obs
     return {k: obs[k][:, at:at + extra] for k in OBS_KEYS}
 
