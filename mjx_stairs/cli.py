@@ -1,5 +1,5 @@
-"""The `mjx-stairs` command: train, eval, critic-map, bench, exp1, terrain, play, export,
-sim2sim."""
+"""The `mjx-stairs` command: train, eval, critic-map, input-use, bench, exp1, terrain, play,
+export, sim2sim."""
 
 from __future__ import annotations
 
@@ -111,6 +111,14 @@ def cmd_curves(args: argparse.Namespace) -> int:
         runs[name if sep else Path(item).name] = path if sep else item
     plots.plot_curves(runs, args.out)  # a missing or broken file: main's one-line error
     print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_input_use(args: argparse.Namespace) -> int:
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import input_use
+
+    print(input_use.markdown(input_use.input_use(load_policy(args.checkpoint), args.samples)))
     return 0
 
 
@@ -266,6 +274,11 @@ def _add_train_and_eval(sub) -> None:
     mesh_flags(c)
     c.add_argument("--out", required=True, help="PNG path")
     c.set_defaults(fn=cmd_critic_map)
+
+    u = sub.add_parser("input-use", help="how much a policy reads each observation term")
+    u.add_argument("--checkpoint", required=True)
+    u.add_argument("--samples", type=int, default=512)
+    u.set_defaults(fn=cmd_input_use)
 
     b = sub.add_parser("bench", help="physics / env / training throughput")
     b.add_argument("--config", default="experiments/stage2_u.toml")
