@@ -1,5 +1,5 @@
 """The `mjx-stairs` command: train, eval, critic-map, input-use, bench, exp1, terrain, play,
-export, sim2sim."""
+export, sim2sim, sim2sim-gaps."""
 
 from __future__ import annotations
 

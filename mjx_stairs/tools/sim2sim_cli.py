@@ -82,3 +82,33 @@ def add_parser(sub) -> None:
     s.add_argument("--mcap", default=None, help="MCAP of the first episode")
     s.add_argument("--out", default=None, help="results JSON")
     s.set_defaults(fn=command)
+
+    g = sub.add_parser("sim2sim-gaps", help="a policy's MJX evaluation beside its sim2sim cells "
+                       "in MuJoCo itself, per paper cell and code case, with the gaps")
+    g.add_argument("--policy", required=True, help="the policy path the sim2sim cells name")
+    g.add_argument("--sim2sim", required=True, help="a folder searched for */cells/*.json")
+    g.add_argument("--mjx", nargs="*", default=[], help="`mjx-stairs eval` folders "
+                   "(results.json): one per direction and evaluation seed")
+    g.add_argument("--mjx-code", nargs="*", default=[], help="`code` suite JSON files")
+    g.add_argument("--robot-sha", default=None, help="only cells run on this robot file "
+                   "(its SHA-256, or a prefix of it)")
+    g.add_argument("--latency-ms", type=float, default=0.0)
+    g.add_argument("--contact-timeconst", type=float, default=0.01)
+    g.add_argument("--out", default=None, help="write the table here (markdown) too")
+    g.set_defaults(fn=gaps_command)
+
+
+def gaps_command(args: argparse.Namespace) -> int:
+    from mjx_stairs import atomic
+    from mjx_stairs.tools import sim2sim_gaps
+
+    cells = sim2sim_gaps.gather(args.policy, args.sim2sim, args.mjx, args.mjx_code,
+                                args.robot_sha, args.latency_ms, args.contact_timeconst)
+    text = sim2sim_gaps.markdown(cells, args.sim2sim, f"`{args.policy}`: MJX and MuJoCo itself "
+                                 f"(latency {args.latency_ms:g} ms, contact "
+                                 f"{args.contact_timeconst:g} s)")
+    print(text, end="")
+    if args.out:
+        atomic.write_text(args.out, text)
+        print(f"wrote {args.out}")
+    return 0
