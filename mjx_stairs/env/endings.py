@@ -108,21 +108,43 @@ robot-steps, and the success of its episodes that ended. The logged `level` mixe
 top levels differ (the paper families end at 12-15 cm risers, the building family at 21 cm)."""
 
 
+CORNERS = {  # name: (damping range N m s/rad, action delay range s), both ends included
+    "damping_low_delay_long": ((0.0, 0.3), (0.015, 1.0)),
+    "damping_low_delay_none": ((0.0, 0.3), (0.0, 0.0)),
+    "damping_high_delay_none": ((1.0, 1e9), (0.0, 0.0)),
+}
+"""Robots whose episode drew its joints' damping and action delay in these ranges, for the
+success of their episodes as `success/<name>` (`#num` / `#den`) when training draws both: the
+corner of damping 0.1 with 20 ms that the evaluation physics falls in (docs/results.md 8ac,
+8ad), and the two ends without delay that a policy trained there loses."""
+
+
+def corner_draws(info: dict, timestep: float) -> tuple[jnp.ndarray, jnp.ndarray] | None:
+    """(joint damping [], action delay s []) this episode drew, read before an auto-reset
+    replaces them; None unless both are drawn."""
+    if "joint_damping" not in info or "delay_steps" not in info:
+        return None
+    return info["joint_damping"], info["delay_steps"] * timestep
+
+
 def metric_names(reward_terms: tuple[str, ...], both_ways: bool = False,
-                 families: tuple[str, ...] = ()) -> tuple[str, ...]:
+                 families: tuple[str, ...] = (), corners: bool = False) -> tuple[str, ...]:
     """The keys of `state.metrics`: `reward/<term>` per active term, then STEP_METRICS (then
     DOWN_METRICS on an atlas walked both ways, then FAMILY_RATIOS' keys for `families` when
-    there are several)."""
+    there are several, then the CORNERS' success keys with `corners`)."""
     per_family = tuple(f"{r}/{f}#{part}" for f in families for r in FAMILY_RATIOS
                        for part in ("num", "den")) if len(families) > 1 else ()
+    per_corner = tuple(f"success/{c}#{part}" for c in CORNERS for part in ("num", "den"))
     return (tuple(f"reward/{k}" for k in reward_terms) + STEP_METRICS
-            + (DOWN_METRICS if both_ways else ()) + per_family)
+            + (DOWN_METRICS if both_ways else ()) + per_family + (per_corner if corners else ()))
 
 
 def family_metrics(families: tuple[str, ...], family: jnp.ndarray, level: jnp.ndarray,
-                   top_level: int, e: Endings) -> dict[str, jnp.ndarray]:
+                   top_level: int, e: Endings,
+                   drawn: tuple[jnp.ndarray, jnp.ndarray] | None = None) -> dict[str, jnp.ndarray]:
     """{FAMILY_RATIOS' `#num` / `#den` keys: []} of this step for a robot of family index
-    `family` at `level` (before the auto-reset); none for an atlas of one family (metric_names)."""
+    `family` at `level` (before the auto-reset); none for an atlas of one family (metric_names).
+    With `drawn` (corner_draws), the CORNERS' success keys too."""
     done, out = e.done.astype(jnp.float32), {}
     for i, name in enumerate(families if len(families) > 1 else ()):
         mine = (family == i).astype(jnp.float32)
@@ -130,6 +152,12 @@ def family_metrics(families: tuple[str, ...], family: jnp.ndarray, level: jnp.nd
                                 ("at_top", (level == top_level) * mine, mine),
                                 ("success", e.success * done * mine, done * mine)):
             out[f"{ratio}/{name}#num"], out[f"{ratio}/{name}#den"] = num, den
+    for name, ((d_lo, d_hi), (s_lo, s_hi)) in (CORNERS.items() if drawn is not None else ()):
+        damping, delay = drawn
+        mine = ((damping >= d_lo) & (damping <= d_hi) & (delay >= s_lo - 1e-6)
+                & (delay <= s_hi + 1e-6)).astype(jnp.float32)
+        out[f"success/{name}#num"] = e.success * done * mine
+        out[f"success/{name}#den"] = done * mine
     return out
 
 

@@ -47,17 +47,13 @@ class StairEnv(Env):
     """Go2 climbing the stairs of an atlas. See the module docstring for the step."""
 
     def __init__(self, atlas: Any, config: EnvConfig | None = None):
-        """Build the model with the atlas heightfield and the per-tile tables on the device.
-
-        Args:
-          atlas: a terrains.Atlas (heights, resolution, rows, cols, families and per-tile tables).
-          config: env settings (None: the defaults).
-        """
+        """Build the model with the heightfield of `atlas` (a terrains.Atlas: heights,
+        resolution, rows, cols, families and per-tile tables) and the per-tile tables on the
+        device; `config`: env settings (None: the defaults)."""
         config = EnvConfig() if config is None else config
         if not config.waypoint_lookahead_m > 0:
-            raise ValueError(
-                f"env.waypoint_lookahead_m: must be > 0, got {config.waypoint_lookahead_m}"
-            )
+            raise ValueError(f"env.waypoint_lookahead_m: must be > 0, got "
+                             f"{config.waypoint_lookahead_m}")
         self.config = config
         self.atlas_shape = tuple(int(s) for s in atlas.heights.shape)
         self.resolution = float(atlas.resolution)
@@ -89,6 +85,8 @@ class StairEnv(Env):
         self._episode_steps = int(round(config.episode_length_s / self._dt))
         self._hold_steps = max(1, int(round(config.success_hold_s / self._dt)))
         self._terms = rw.active_terms(config.rewards)
+        r = config.randomization  # both drawn: the CORNERS' success metrics (env.endings)
+        self._corners = bool(r.enabled and r.joint_damping and r.action_delay_s[1] > 0)
 
     # ------------------------------------------------------------------ properties
 
@@ -233,6 +231,7 @@ class StairEnv(Env):
         with jax.named_scope("observe"):  # a reset's observation counts as auto_reset
             final_obs = self.observe(data.qpos, data.qvel, info, k_noise, arc=arc, kin=kin)
         level, tile = info["level"], info["tile"]
+        drawn = endings.corner_draws(info, c.robot.timestep) if self._corners else None
         moved_up = cur.reached(q.planar_goal_distance, q.yaw_error, c.curriculum)
         data, obs, info = self._auto_reset(data, info, final_obs, ends, moved_up, k_reset)
         metrics = endings.metrics(terms, ends, finite, level, self.num_levels - 1,
@@ -240,7 +239,7 @@ class StairEnv(Env):
         if self.both_ways:
             metrics.update(endings.down_metrics(ends, self.tiles.down[tile]))
         metrics.update(endings.family_metrics(self.families, info["family"], level,
-                                              self.num_levels - 1, ends))
+                                              self.num_levels - 1, ends, drawn))
         f32 = lambda x: x.astype(jnp.float32)  # noqa: E731  (also when the physics is float64)
         return State(data, obs, f32(reward), f32(ends.done), jax.tree.map(f32, metrics), info)
 
@@ -323,7 +322,7 @@ class StairEnv(Env):
 
     def metric_names(self) -> tuple[str, ...]:
         """The keys of `state.metrics` (env.endings.metric_names)."""
-        return endings.metric_names(self._terms, self.both_ways, self.families)
+        return endings.metric_names(self._terms, self.both_ways, self.families, self._corners)
 
     # ------------------------------------------------------------------ observation
 

@@ -12,7 +12,7 @@ import pytest
 from mujoco import mjx
 
 import terrains
-from mjx_stairs.env import observation
+from mjx_stairs.env import endings, observation
 from mjx_stairs.env import randomization as dr
 from mjx_stairs.env.config import env_config_from
 from mjx_stairs.env.geometry import quat_to_mat
@@ -273,3 +273,40 @@ def test_a_motor_drawn_stronger_gets_its_torque_past_the_nominal_limit(env, roll
         out = actuate(data, action, dict(info, motor_strength=jnp.full(12, strength)))[0]
         force = np.abs(np.asarray(out.actuator_force))[hip_thigh]
         np.testing.assert_allclose(force, strength * rb.TORQUE_LIMIT[hip_thigh], rtol=1e-5)
+
+
+def test_the_corners_count_the_episodes_that_drew_them(env, rollout):
+    """success/<corner>: the episodes that ended this step and drew the corner's damping and
+    delay (read before the auto-reset draws anew), and their successes."""
+    assert "success/damping_low_delay_long#den" in env.metric_names()
+    states = [rollout[0]] + rollout[1]
+    for prev, s in zip(states[:-1], states[1:], strict=True):
+        damping = np.asarray(prev.info["joint_damping"])
+        delay = np.asarray(prev.info["delay_steps"]) * env.config.robot.timestep
+        for name, ((d_lo, d_hi), (s_lo, s_hi)) in endings.CORNERS.items():
+            mine = ((damping >= d_lo) & (damping <= d_hi) & (delay >= s_lo - 1e-6)
+                    & (delay <= s_hi + 1e-6))
+            np.testing.assert_array_equal(s.metrics[f"success/{name}#den"],
+                                          np.asarray(s.metrics["done"]) * mine)
+            np.testing.assert_array_equal(s.metrics[f"success/{name}#num"],
+                                          np.asarray(s.metrics["episode_success"]) * mine)
+
+
+def test_each_corner_takes_its_own_robots():
+    """Four robots: damping 0.1 at 20 ms (succeeded), 0.1 at 0 ms (fell), 1.5 at 0 ms (still
+    walking), 0.5 at 20 ms (in no corner)."""
+    no = jnp.zeros(4, bool)
+    e = endings.Endings(success=jnp.array([1.0, 0.0, 0.0, 1.0]), success_count=jnp.zeros(4),
+                        tilted=no, too_low=no, fell=no, outside=no, trunk_hit=no,
+                        terminated=no, truncated=no, done=jnp.array([True, True, False, True]))
+    drawn = (jnp.array([0.1, 0.1, 1.5, 0.5]), jnp.array([0.02, 0.0, 0.0, 0.02]))
+    out = endings.family_metrics(("u_shaped",), jnp.int32(0), jnp.int32(1), 9, e, drawn)
+    got = {k: np.asarray(v).tolist() for k, v in out.items()}
+    assert got == {
+        "success/damping_low_delay_long#num": [1, 0, 0, 0],
+        "success/damping_low_delay_long#den": [1, 0, 0, 0],
+        "success/damping_low_delay_none#num": [0, 0, 0, 0],
+        "success/damping_low_delay_none#den": [0, 1, 0, 0],
+        "success/damping_high_delay_none#num": [0, 0, 0, 0],
+        "success/damping_high_delay_none#den": [0, 0, 0, 0],  # not done yet
+    }
