@@ -91,6 +91,8 @@ def mjx_successes(folders: list[str | Path], code_json: list[str | Path]) -> dic
     for folder in folders:
         path = Path(folder) / "results.json"
         for rec in json.loads(path.read_text()):
+            if rec.get("schedule", "test") != "test":  # the paper's test levels only
+                continue
             for level, s in zip(rec["levels"], rec["success"], strict=True):
                 out.setdefault((rec["family"], rec.get("direction", "up"), int(level)),
                                []).append(float(s))
