@@ -152,8 +152,10 @@ def family_metrics(families: tuple[str, ...], family: jnp.ndarray, level: jnp.nd
                                 ("at_top", (level == top_level) * mine, mine),
                                 ("success", e.success * done * mine, done * mine)):
             out[f"{ratio}/{name}#num"], out[f"{ratio}/{name}#den"] = num, den
-    for name, ((d_lo, d_hi), (s_lo, s_hi)) in (CORNERS.items() if drawn is not None else ()):
-        damping, delay = drawn
+    if drawn is None:
+        return out
+    damping, delay = drawn
+    for name, ((d_lo, d_hi), (s_lo, s_hi)) in CORNERS.items():
         mine = ((damping >= d_lo) & (damping <= d_hi) & (delay >= s_lo - 1e-6)
                 & (delay <= s_hi + 1e-6)).astype(jnp.float32)
         out[f"success/{name}#num"] = e.success * done * mine

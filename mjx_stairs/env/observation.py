@@ -105,6 +105,14 @@ def n_vec(history: int = 0, delay: bool = False) -> int:
     return sum(t.size for t in vector_terms(history, delay))
 
 
+def slices(terms: tuple[ObsTerm, ...]) -> dict[str, slice]:
+    """{term name: its slice of the observation} for `terms` laid out in order."""
+    out, at = {}, 0
+    for t in terms:
+        out[t.name], at = slice(at, at + t.size), at + t.size
+    return out
+
+
 def height_map_term(hm: HeightMapConfig) -> ObsTerm:
     return ObsTerm("height_map", hm.size * hm.size, "m", "height", 1.0,
                    f"{hm.size} x {hm.size} heights, row-major (rows along the base's yaw-frame "

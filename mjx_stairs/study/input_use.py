@@ -28,11 +28,9 @@ def term_slices(policy: Policy) -> dict[str, slice]:
     """{term name: its slice of the actor observation} from the env config saved in the policy
     file; the height map as one term."""
     env = saved_config(policy, "env") or {}
-    terms = observation.vector_terms(int(env.get("obs_history", 0)),
-                                     bool(env.get("obs_action_delay", False)))
-    out, at = {}, 0
-    for t in terms:
-        out[t.name], at = slice(at, at + t.size), at + t.size
+    out = observation.slices(observation.vector_terms(int(env.get("obs_history", 0)),
+                                                     bool(env.get("obs_action_delay", False))))
+    at = max(sl.stop for sl in out.values())
     if at != policy.layout.n_vec:
         raise ValueError(f"the policy's saved env config gives {at} vector inputs, its layout "
                          f"{policy.layout.n_vec}: not a policy file of this version")
