@@ -16,6 +16,7 @@ import json
 import os
 import tempfile
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -134,13 +135,16 @@ def compact(src: str | Path, dst: str | Path, zero: tuple[str, ...] = (),
     _write(dst, arrays, compressed=True)
 
 
-def load(path: str | Path, template: Any = None) -> tuple[Any, dict[str, Any]]:
+def load(path: str | Path, template: Any = None,
+         zero_if_missing: Callable[[str], bool] | None = None) -> tuple[Any, dict[str, Any]]:
     """Read a checkpoint; returns (tree, metadata).
 
     With ``template`` (a pytree of arrays or ``jax.ShapeDtypeStruct``s, e.g. from
     ``jax.eval_shape``) the stored leaves must have exactly the template's tree paths, shapes and
     dtypes, and the result has the template's structure (numpy leaves; typed PRNG keys
     re-wrapped). Without a template the result is a flat ``{tree path: np.ndarray}`` dict.
+    ``zero_if_missing(tree path)``: a template entry the file lacks that may start as zeros
+    (e.g. a per-step metric that a later version added, which the env rewrites every step).
     """
     path = Path(path)
     arrays, meta = _open(path)
@@ -151,6 +155,10 @@ def load(path: str | Path, template: Any = None) -> tuple[Any, dict[str, Any]]:
     if template is None:
         return {k: arrays[k] for k in keys}, meta
     t_keys, t_leaves = _flatten(template)
+    for k, t in zip(t_keys, t_leaves, strict=True):
+        if k not in arrays and zero_if_missing is not None and zero_if_missing(k) \
+                and not _is_key(t):
+            arrays[k] = np.zeros(t.shape, t.dtype)
     missing = [k for k in t_keys if k not in arrays]
     extra = [k for k in keys if k not in set(t_keys)]
     if missing or extra:

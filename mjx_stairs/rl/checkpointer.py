@@ -91,7 +91,8 @@ def load_state(path: str | Path, trainer: Trainer,
     action delay term added, trainer.appends_terms): zero weights and Adam moments for them in
     the first actor and critic layer, their normaliser entries from 256 fresh resets of the
     trainer's env (trainer.new_inputs_seen), zeros in the stored actor observation; the run
-    goes on with its curriculum, optimiser and counters."""
+    goes on with its curriculum, optimiser and counters. A state saved before a per-step metric
+    was added resumes (_step_metric)."""
     meta = checkpoint.load_metadata(path)
     if meta.get("kind") != "train_state":
         raise checkpoint.CheckpointError(f"{path}: not a train-state checkpoint")
@@ -109,7 +110,7 @@ def load_state(path: str | Path, trainer: Trainer,
                                          "(train.checkpoint_env='packed') resumes widened")
     at_obs = int(meta["layout"]["n_vec"]) if widened else 0
     host, meta = checkpoint.load(path, _resized(template, at_obs, extra, widen=False) if widened
-                                 else template)
+                                 else template, zero_if_missing=_step_metric)
     if widened:
         host = _resized(host, at_obs, extra, widen=True,
                         seen=new_inputs_seen(trainer.env, at_obs, extra))
@@ -122,6 +123,12 @@ def load_state(path: str | Path, trainer: Trainer,
                            trainer.sharding._replace(env_state=None))
         return state._replace(env_state=env_state), meta
     return put_global(host, trainer.sharding), meta
+
+
+def _step_metric(tree_path: str) -> bool:
+    """An entry of the env state's metrics: the env rewrites every one each step (a metric added
+    after a state was saved starts as zeros, which the first step replaces)."""
+    return tree_path.startswith((".env_state.metrics[", ".env_state['metrics']["))  # full, packed
 
 
 def _resized(state: TrainState, at_obs: int, extra: int, widen: bool,

@@ -147,6 +147,30 @@ def test_chunk_save_load_chunk_is_bit_exact(tmp_path):
     assert _leaves_equal(m2, m2b)
 
 
+def test_a_state_saved_before_a_metric_was_added_resumes_as_it_would_have(tmp_path):
+    """A per-step metric added after a state was saved (e.g. env.endings.CORNERS) starts as
+    zeros, which the first step rewrites: the resumed chunk equals the one from the full state.
+    Any other entry missing stays a clear error."""
+    env = PointReach(map_shape=(5, 5))
+    trainer = train_lib.build_trainer(MAP_CFG, env)
+    s1, _ = trainer.chunk(trainer.init(jax.random.PRNGKey(3)))
+    old = {k: v for k, v in s1.env_state.metrics.items() if k != "success"}
+    path = tmp_path / "state.npz"
+    checkpointer.save_state(path, s1._replace(env_state=s1.env_state.replace(metrics=old)),
+                            MAP_CFG, trainer.layout)
+    no_rng = tmp_path / "no_rng.npz"
+    checkpointer.save_state(no_rng, s1._replace(env_state=s1.env_state.replace(
+        info={k: v for k, v in s1.env_state.info.items() if k != "rng"})), MAP_CFG,
+        trainer.layout)
+    restored, _ = checkpointer.load_state(path, trainer)
+    assert np.all(np.asarray(restored.env_state.metrics["success"]) == 0.0)
+    s2, m2 = trainer.chunk(s1)
+    s2b, m2b = trainer.chunk(restored)
+    assert _leaves_equal(s2, s2b) and _leaves_equal(m2, m2b)
+    with pytest.raises(checkpoint.CheckpointError, match=r"missing 1 entries .*\['rng'\]"):
+        checkpointer.load_state(no_rng, trainer)
+
+
 def test_a_packed_state_resumes_with_inputs_appended(tmp_path):
     """A run resumed with more observation at the end of its vector part (env.obs_action_delay
     over a run without it; checkpointer.load_state's widen): zero weights and Adam moments for
