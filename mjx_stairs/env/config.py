@@ -228,6 +228,10 @@ class EnvConfig:
     # 20 ms delay from none, and a policy trained over both holds only one diagonal of the
     # damping x delay square; false: not observed, as every published policy.
     obs_action_delay: bool = False
+    # false (with obs_action_delay): the critic alone reads the delay, the actor reads 0 there
+    # (an asymmetric critic: the return's dependence on the delay in the value baseline, one
+    # policy for every delay; the sidecar gives the term scale 0, so a robot program writes 0).
+    obs_action_delay_actor: bool = True
 
     def __post_init__(self):
         lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
@@ -240,6 +244,10 @@ class EnvConfig:
              "an integer in [0, 50] (policy steps)"),
             ("obs_action_delay", self.obs_action_delay, isinstance(self.obs_action_delay, bool),
              "true or false"),
+            ("obs_action_delay_actor", self.obs_action_delay_actor,
+             self.obs_action_delay_actor is True
+             or (self.obs_action_delay_actor is False and self.obs_action_delay),
+             "true, or false with obs_action_delay true (the critic alone reads the delay)"),
             ("randomization.action_delay_s", lag, lag <= step + 1e-9,
              f"at most one policy step ({step:g} s)"),
             ("robot.action_delay_s", fixed, 0.0 <= fixed <= step + 1e-9,

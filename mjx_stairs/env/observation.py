@@ -140,17 +140,26 @@ def n_vec_of(config) -> int:
     return n_vec(config.obs_history, config.obs_action_delay)
 
 
+def critic_only(config) -> tuple[str, ...]:
+    """The terms of an env config's observation that the actor reads as 0 (the critic alone
+    reads them): the action delay with env.obs_action_delay_actor false."""
+    return () if config.obs_action_delay_actor else (DELAY_TERM.name,)
+
+
 def assemble(values: dict[str, jnp.ndarray], hm: HeightMapConfig, noise: NoiseConfig,
-             rng: jax.Array | None, history: int = 0,
-             delay: bool = False) -> dict[str, jnp.ndarray]:
+             rng: jax.Array | None, history: int = 0, delay: bool = False,
+             critic_only: tuple[str, ...] = ()) -> dict[str, jnp.ndarray]:
     """{"state", "privileged_state"} [size] from {term name: [term size]}; with ``rng`` None or
-    the noise off both are clean."""
+    the noise off both are clean. ``critic_only``: terms the actor reads as 0."""
     table = terms(hm, history, delay)
     clean = jnp.concatenate([values[t.name] if t.scale == 1.0 else t.scale * values[t.name]
                              for t in table])
-    if not noise.enabled or rng is None:
-        return {"state": clean, "privileged_state": clean}
-    widths = jnp.concatenate([jnp.full((t.size,), getattr(noise, t.noise) if t.noise else 0.0)
-                              for t in table])
-    noisy = clean + widths * jax.random.uniform(rng, clean.shape, minval=-1.0, maxval=1.0)
-    return {"state": noisy, "privileged_state": clean}
+    actor = clean
+    if noise.enabled and rng is not None:
+        widths = jnp.concatenate([jnp.full((t.size,), getattr(noise, t.noise) if t.noise
+                                           else 0.0) for t in table])
+        actor = clean + widths * jax.random.uniform(rng, clean.shape, minval=-1.0, maxval=1.0)
+    at = slices(table)
+    for name in critic_only:
+        actor = actor.at[at[name]].set(0.0)
+    return {"state": actor, "privileged_state": clean}

@@ -366,7 +366,7 @@ class StairEnv(Env):
             steps = info.get("delay_steps", jnp.zeros((), jnp.int32))
             values["action_delay"] = (steps * c.robot.timestep).astype(jnp.float32)[None]
         obs = observation.assemble(values, c.height_map, c.noise, rng, c.obs_history,
-                                   c.obs_action_delay)
+                                   c.obs_action_delay, observation.critic_only(c))
         return perception.corrupt(obs, info, rng, self.config)
 
     def pack_state(self, state: State) -> dict[str, Any]:

@@ -66,16 +66,19 @@ def _goal_description(cfg: EnvConfig, desc: str) -> str:
 
 def _layout(cfg: EnvConfig) -> list[dict[str, Any]]:
     hm, clips = cfg.height_map, _clip_ranges(cfg)
-    entries, i = [], 0
+    entries, i, blind = [], 0, observation.critic_only(cfg)
     for term in observation.of_config(cfg):
         desc = term.description
+        if term.name in blind:
+            desc = f"{desc}; the critic's alone in training: the actor read 0 here (scale 0)"
         if term.name == "goal":
             desc = _goal_description(cfg, desc)
         if term.name == "height_map":
             desc = f"{desc}; index = {i} + row * {hm.size} + col"
         entries.append({
             "name": term.name, "start": i, "stop": i + term.size, "unit": term.unit,
-            "scale": term.scale, "clip": clips.get(term.name), "description": desc,
+            "scale": 0.0 if term.name in blind else term.scale, "clip": clips.get(term.name),
+            "description": desc,
             "training_noise": getattr(cfg.noise, term.noise) if term.noise else 0.0})
         i += term.size
     return entries
@@ -261,8 +264,10 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
             "action_delay": ("the 'action_delay' term: the robot's own action delay (from "
                              "measuring an observation to its PD target taking effect), "
                              "measured once, times the term's scale; training drew "
-                             f"{_delay_range(cfg)} s per robot") if cfg.obs_action_delay
-            else None,
+                             f"{_delay_range(cfg)} s per robot"
+                             + ("; the critic alone read it: its scale is 0, write 0"
+                                if not cfg.obs_action_delay_actor else ""))
+            if cfg.obs_action_delay else None,
         },
         "normalizer": None if norm is None else {
             "applied_in_graph": True, "clip": norm[2], "std_eps": STD_EPS,

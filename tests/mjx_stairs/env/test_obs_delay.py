@@ -31,17 +31,22 @@ def test_the_delay_term_is_the_vector_parts_last_entry():
     assert m.obs.index[at] == at and m.obs.sign[at] == 1.0
 
 
-@pytest.fixture(scope="module")
-def reset_states():
-    """16 robots reset with the delay drawn over 0-20 ms (0-4 physics steps) and observed."""
+def _reset(actor: bool = True):
+    """16 robots reset with the delay drawn over 0-20 ms (0-4 physics steps) and observed (by
+    the actor too, or the critic alone)."""
     atlas = terrains.build_cell_atlas([("straight", "test", 2)], 1, resolution=0.1,
                                       tile_size=10.0, border=1.0)
-    cfg = EnvConfig(obs_action_delay=True, episode_length_s=6.0,
+    cfg = EnvConfig(obs_action_delay=True, obs_action_delay_actor=actor, episode_length_s=6.0,
                     randomization=RandomizationConfig(action_delay_s=(0.0, 0.02)))
     env = StairEnv(atlas, cfg)
     reset = jax.jit(jax.vmap(env.reset_at))
     return env, reset(jax.random.split(jax.random.PRNGKey(0), B), jnp.zeros(B, jnp.int32),
                       jnp.zeros(B, jnp.int32))
+
+
+@pytest.fixture(scope="module")
+def reset_states():
+    return _reset()
 
 
 def test_each_robot_observes_the_delay_it_drew(reset_states):
@@ -53,6 +58,22 @@ def test_each_robot_observes_the_delay_it_drew(reset_states):
     for key in ("state", "privileged_state"):  # no noise on it
         np.testing.assert_allclose(np.asarray(s.obs[key])[:, at], want, atol=1e-6)
     assert set(np.round(want, 6).tolist()) <= {0.0, 0.25, 0.5, 0.75, 1.0}
+
+
+def test_an_asymmetric_critic_alone_reads_the_delay(reset_states):
+    """env.obs_action_delay_actor false: the actor reads 0 where the critic reads the delay;
+    every other entry as with the delay observed by both."""
+    with pytest.raises(ConfigError, match="obs_action_delay_actor"):
+        EnvConfig(obs_action_delay_actor=False)  # nothing to hide
+    _, told = reset_states
+    _, blind = _reset(actor=False)
+    at = observation.N_VEC
+    np.testing.assert_array_equal(np.asarray(blind.obs["state"])[:, at], 0.0)
+    np.testing.assert_array_equal(np.asarray(blind.obs["privileged_state"]),
+                                  np.asarray(told.obs["privileged_state"]))
+    assert np.asarray(told.obs["state"])[:, at].max() > 0  # the draws reach the told actor
+    np.testing.assert_array_equal(np.delete(np.asarray(blind.obs["state"]), at, 1),
+                                  np.delete(np.asarray(told.obs["state"]), at, 1))
 
 
 @pytest.mark.parametrize("saved, history, delay, widens", [
