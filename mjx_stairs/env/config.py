@@ -232,6 +232,12 @@ class EnvConfig:
     # (an asymmetric critic: the return's dependence on the delay in the value baseline, one
     # policy for every delay; the sidecar gives the term scale 0, so a robot program writes 0).
     obs_action_delay_actor: bool = True
+    # The leg joints' passive damping (drawn per robot by randomization.joint_damping, else the
+    # robot's) as an input of the critic alone (observation.DAMPING_TERM, after the delay; the
+    # actor reads 0 there, the sidecar gives it scale 0): the return at damping 0.1 with a long
+    # delay is far below the rest (docs/results.md 8ac-8ae), a baseline that cannot see it mixes
+    # the two.
+    obs_joint_damping: bool = False
 
     def __post_init__(self):
         lag, step = self.randomization.action_delay_s[1], self.robot.timestep * self.decimation
@@ -244,6 +250,8 @@ class EnvConfig:
              "an integer in [0, 50] (policy steps)"),
             ("obs_action_delay", self.obs_action_delay, isinstance(self.obs_action_delay, bool),
              "true or false"),
+            ("obs_joint_damping", self.obs_joint_damping,
+             isinstance(self.obs_joint_damping, bool), "true or false"),
             ("obs_action_delay_actor", self.obs_action_delay_actor,
              self.obs_action_delay_actor is True
              or (self.obs_action_delay_actor is False and self.obs_action_delay),

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from mjx_stairs.env.config import HeightMapConfig, NoiseConfig
+from mjx_stairs.sim import robot as rb
 
 
 class ObsTerm(NamedTuple):
@@ -91,18 +92,26 @@ DELAY_TERM = ObsTerm(
     "the action delay: from the moment the observation is measured to the moment the PD target "
     "computed from it takes effect at the motors (a robot program measures its own once); value "
     f"= {DELAY_SCALE:g} * delay_s, 1 at 20 ms")
-"""With env.obs_action_delay, after the history terms (the vector part's last entry)."""
+"""With env.obs_action_delay, after the history terms."""
+
+DAMPING_TERM = ObsTerm(
+    "joint_damping", 1, "N m s/rad", None, 1.0,
+    "the leg joints' passive damping (training's drawn or set value): the critic's alone, the "
+    "actor reads 0 here")
+"""With env.obs_joint_damping, after the delay term: a privileged input of the critic."""
 
 
-def vector_terms(history: int = 0, delay: bool = False) -> tuple[ObsTerm, ...]:
-    """The vector part, in order, with `history` steps of history and, with `delay`, the action
-    delay last."""
-    return (*VECTOR, *history_terms(history), *((DELAY_TERM,) if delay else ()))
+def vector_terms(history: int = 0, delay: bool = False,
+                 damping: bool = False) -> tuple[ObsTerm, ...]:
+    """The vector part, in order, with `history` steps of history, then with `delay` the action
+    delay and with `damping` the joints' damping."""
+    return (*VECTOR, *history_terms(history), *((DELAY_TERM,) if delay else ()),
+            *((DAMPING_TERM,) if damping else ()))
 
 
-def n_vec(history: int = 0, delay: bool = False) -> int:
-    """Length of the vector part with `history` steps of history (and the delay term)."""
-    return sum(t.size for t in vector_terms(history, delay))
+def n_vec(history: int = 0, delay: bool = False, damping: bool = False) -> int:
+    """Length of the vector part with `history` steps of history (and the delay, damping)."""
+    return sum(t.size for t in vector_terms(history, delay, damping))
 
 
 def slices(terms: tuple[ObsTerm, ...]) -> dict[str, slice]:
@@ -120,38 +129,56 @@ def height_map_term(hm: HeightMapConfig) -> ObsTerm:
                    f"-{hm.clip}, {hm.clip})")
 
 
-def terms(hm: HeightMapConfig, history: int = 0, delay: bool = False) -> tuple[ObsTerm, ...]:
+def terms(hm: HeightMapConfig, history: int = 0, delay: bool = False,
+          damping: bool = False) -> tuple[ObsTerm, ...]:
     """Every term of an observation, in order."""
-    return (*vector_terms(history, delay), height_map_term(hm))
+    return (*vector_terms(history, delay, damping), height_map_term(hm))
 
 
-def size(hm: HeightMapConfig, history: int = 0, delay: bool = False) -> int:
+def size(hm: HeightMapConfig, history: int = 0, delay: bool = False,
+         damping: bool = False) -> int:
     """Floats per observation."""
-    return n_vec(history, delay) + hm.size * hm.size
+    return n_vec(history, delay, damping) + hm.size * hm.size
 
 
 def of_config(config) -> tuple[ObsTerm, ...]:
     """Every term of the observation an env of this EnvConfig builds."""
-    return terms(config.height_map, config.obs_history, config.obs_action_delay)
+    return terms(config.height_map, config.obs_history, config.obs_action_delay,
+                 config.obs_joint_damping)
 
 
 def n_vec_of(config) -> int:
     """Length of the vector part of the observation an env of this EnvConfig builds."""
-    return n_vec(config.obs_history, config.obs_action_delay)
+    return n_vec(config.obs_history, config.obs_action_delay, config.obs_joint_damping)
 
 
 def critic_only(config) -> tuple[str, ...]:
     """The terms of an env config's observation that the actor reads as 0 (the critic alone
-    reads them): the action delay with env.obs_action_delay_actor false."""
-    return () if config.obs_action_delay_actor else (DELAY_TERM.name,)
+    reads them): the action delay with env.obs_action_delay_actor false, the joints' damping."""
+    return (*(() if config.obs_action_delay_actor else (DELAY_TERM.name,)),
+            *((DAMPING_TERM.name,) if config.obs_joint_damping else ()))
 
 
-def assemble(values: dict[str, jnp.ndarray], hm: HeightMapConfig, noise: NoiseConfig,
-             rng: jax.Array | None, history: int = 0, delay: bool = False,
-             critic_only: tuple[str, ...] = ()) -> dict[str, jnp.ndarray]:
-    """{"state", "privileged_state"} [size] from {term name: [term size]}; with ``rng`` None or
-    the noise off both are clean. ``critic_only``: terms the actor reads as 0."""
-    table = terms(hm, history, delay)
+def robot_values(config, info: dict) -> dict[str, jnp.ndarray]:
+    """The robot's own terms that an env config observes, from its reset draws in `info`: the
+    action delay (whole physics steps, in s) and the joints' damping (where not drawn, the
+    robot's: env.robot.joint_damping, else the MJCF's)."""
+    out = {}
+    if config.obs_action_delay:
+        steps = info.get("delay_steps", jnp.zeros((), jnp.int32))
+        out[DELAY_TERM.name] = (steps * config.robot.timestep).astype(jnp.float32)[None]
+    if config.obs_joint_damping:
+        fixed = config.robot.joint_damping
+        out[DAMPING_TERM.name] = jnp.asarray(info.get("joint_damping", rb.JOINT_DAMPING if fixed
+                                                      is None else fixed), jnp.float32).reshape(1)
+    return out
+
+
+def assemble(values: dict[str, jnp.ndarray], table: tuple[ObsTerm, ...], noise: NoiseConfig,
+             rng: jax.Array | None, critic_only: tuple[str, ...] = ()) -> dict[str, jnp.ndarray]:
+    """{"state", "privileged_state"} [size] from {term name: [term size]} laid out as `table`
+    (terms, of_config); with ``rng`` None or the noise off both are clean. ``critic_only``:
+    terms the actor reads as 0."""
     clean = jnp.concatenate([values[t.name] if t.scale == 1.0 else t.scale * values[t.name]
                              for t in table])
     actor = clean

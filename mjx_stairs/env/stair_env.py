@@ -362,11 +362,9 @@ class StairEnv(Env):
         if c.obs_history:
             values.update(joint_pos_history=info["joint_pos_history"].reshape(-1),
                           action_history=info["action_history"].reshape(-1))
-        if c.obs_action_delay:  # this robot's delay (actuation: whole physics steps), s
-            steps = info.get("delay_steps", jnp.zeros((), jnp.int32))
-            values["action_delay"] = (steps * c.robot.timestep).astype(jnp.float32)[None]
-        obs = observation.assemble(values, c.height_map, c.noise, rng, c.obs_history,
-                                   c.obs_action_delay, observation.critic_only(c))
+        values.update(observation.robot_values(c, info))
+        obs = observation.assemble(values, observation.of_config(c), c.noise, rng,
+                                   observation.critic_only(c))
         return perception.corrupt(obs, info, rng, self.config)
 
     def pack_state(self, state: State) -> dict[str, Any]:

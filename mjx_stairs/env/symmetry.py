@@ -59,6 +59,7 @@ _VECTOR_SIGNS = {  # the vector terms: their own components, signs only
     "projected_gravity": (1.0, -1.0, 1.0),
     "goal": (1.0, -1.0, 1.0, -1.0),  # x, y, z in the base frame, then the yaw error
     "action_delay": (1.0,),  # a time: the same in the mirror
+    "joint_damping": (1.0,),  # every leg joint's: the same in the mirror
 }
 _JOINT_TERMS = ("joint_pos", "joint_vel", "last_action", "joint_pos_history", "action_history")
 

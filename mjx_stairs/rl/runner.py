@@ -230,13 +230,14 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     main = distributed.is_main()
     env = getattr(config, "env", None)  # the observation's layout (rl knows no env config)
     hist, delay = getattr(env, "obs_history", 0), getattr(env, "obs_action_delay", False)
+    damping = getattr(env, "obs_joint_damping", False)
     if resume:
         ckpt_dir = run_dir / "checkpoints"
         path = checkpoint.latest_checkpoint(ckpt_dir) if resume is True else Path(resume)
         if path is None:
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
         state, meta = load_state(path, trainer,
-                                 widen=lambda saved: appends_terms(saved, hist, delay))
+                                 widen=lambda saved: appends_terms(saved, hist, delay, damping))
         diff = _config_diff(meta.get("config", {}), config_dict(config))
         if diff and main:
             warnings.warn(f"resuming {path} with a changed config: {'; '.join(diff)}",
@@ -252,7 +253,7 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
     if init_from:
         std = getattr(config, "init_from_std", 0.0)
         state = start_from_policy(state, init_from, trainer, history=hist, std=std,
-                                  delay=delay)
+                                  delay=delay, damping=damping)
         _say(f"initialised params and normaliser from {init_from}"
              + (f", exploration std {std}" if std else ""))
     if main:

@@ -339,12 +339,18 @@ def compiled_chunk(trainer: Trainer, state: TrainState) -> tuple[Callable, float
     return compiled, time.time() - t0
 
 
-def appends_terms(saved_env: dict, history: int, delay: bool) -> bool:
-    """Whether an observation of `history` steps (and the delay term) only appends terms to the
-    vector part of the one a policy of env config `saved_env` observed (env.observation's order:
-    ..., goal, history, action delay): the same history or none saved, the delay added."""
-    h, d = int(saved_env.get("obs_history", 0)), bool(saved_env.get("obs_action_delay", False))
-    return (h == history or (h == 0 and not d)) and d <= delay and (h, d) != (history, delay)
+def appends_terms(saved_env: dict, history: int, delay: bool, damping: bool = False) -> bool:
+    """Whether an observation of `history` steps (the delay term, the damping term) only appends
+    terms to the vector part of the one a policy of env config `saved_env` observed
+    (env.observation's order: ..., goal, history, action delay, joint damping)."""
+    def optional(h: int, d: bool, m: bool) -> list:
+        return [t for t, on in ((("history", h), h > 0), ("delay", d), ("damping", m)) if on]
+
+    old = optional(int(saved_env.get("obs_history", 0)),
+                   bool(saved_env.get("obs_action_delay", False)),
+                   bool(saved_env.get("obs_joint_damping", False)))
+    new = optional(history, bool(delay), bool(damping))
+    return len(new) > len(old) and new[:len(old)] == old
 
 
 def new_inputs_seen(env, at: int, extra: int, n: int = 256) -> dict[str, jax.Array]:
@@ -355,7 +361,8 @@ def new_inputs_seen(env, at: int, extra: int, n: int = 256) -> dict[str, jax.Arr
 
 
 def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
-                      history: int = 0, std: float = 0.0, delay: bool = False) -> TrainState:
+                      history: int = 0, std: float = 0.0, delay: bool = False,
+                      damping: bool = False) -> TrainState:
     """Replace the params and normaliser of a fresh state by those of a policy file (stage 2
     starts from stage 1). The Adam moments, RNG and counters stay fresh. `std` > 0: the policy's
     exploration std (every action) is set to it, e.g. to explore again from a policy whose std
@@ -367,7 +374,8 @@ def start_from_policy(state: TrainState, path: str | Path, trainer: Trainer,
     saved = policy_lib.load_policy(path)
     want = jax.tree_util.tree_map(jnp.shape, (state.params, state.normalizer))
     extra = int(state.normalizer["state"].mean.shape[0]) - saved.layout.obs_size
-    if extra > 0 and appends_terms(policy_lib.saved_config(saved, "env") or {}, history, delay):
+    if extra > 0 and appends_terms(policy_lib.saved_config(saved, "env") or {}, history, delay,
+                                   damping):
         saved = policy_lib.widen_for_history(
             saved, extra, new_inputs_seen(trainer.env, saved.layout.n_vec, extra))
     got = jax.tree_util.tree_map(jnp.shape, (saved.params, saved.normalizer))

@@ -29,7 +29,8 @@ def term_slices(policy: Policy) -> dict[str, slice]:
     file; the height map as one term."""
     env = saved_config(policy, "env") or {}
     out = observation.slices(observation.vector_terms(int(env.get("obs_history", 0)),
-                                                     bool(env.get("obs_action_delay", False))))
+                                                     bool(env.get("obs_action_delay", False)),
+                                                     bool(env.get("obs_joint_damping", False))))
     at = max(sl.stop for sl in out.values())
     if at != policy.layout.n_vec:
         raise ValueError(f"the policy's saved env config gives {at} vector inputs, its layout "

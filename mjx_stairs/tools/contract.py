@@ -27,7 +27,9 @@ HISTORY_TERMS = ("joint_pos_history", "action_history")
 DELAY_TERM = "action_delay"
 """The term of a policy that observes its action delay (Measurement.action_delay_s, times the
 term's scale)."""
-OPTIONAL_TERMS = (*HISTORY_TERMS, DELAY_TERM)
+CRITIC_TERMS = ("joint_damping",)
+"""Terms a policy's critic alone read in training (scale 0 in the sidecar): written as 0."""
+OPTIONAL_TERMS = (*HISTORY_TERMS, DELAY_TERM, *CRITIC_TERMS)
 
 
 class ContractError(ValueError):
@@ -113,6 +115,9 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         slices[e["name"]] = slice(e["start"], e["stop"])
         if e["name"] == DELAY_TERM:
             delay_scale = float(e.get("scale", 1.0))
+        if e["name"] in CRITIC_TERMS and float(e.get("scale", 1.0)) != 0.0:
+            raise ContractError(f"{w}: the {e['name']} term is the critic's alone (scale 0), "
+                                f"not {e.get('scale', 1.0)}: this reader cannot measure it")
         noise[e["start"]:e["stop"]] = e.get("training_noise", 0.0)
         at = e["stop"]
     if at != size or set(slices) - set(OPTIONAL_TERMS) != set(TERMS):
@@ -329,6 +334,7 @@ def observation(c: Contract, m: Measurement) -> np.ndarray:
                                            c.action_clip).ravel()
     if c.delay_scale is not None:
         values[DELAY_TERM] = [c.delay_scale * m.action_delay_s]
+    values.update({t: [0.0] for t in CRITIC_TERMS if t in c.slices})
     out = np.zeros(c.obs_size, np.float64)
     for name, sl in c.slices.items():
         out[sl] = values[name]

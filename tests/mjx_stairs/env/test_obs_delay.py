@@ -31,13 +31,15 @@ def test_the_delay_term_is_the_vector_parts_last_entry():
     assert m.obs.index[at] == at and m.obs.sign[at] == 1.0
 
 
-def _reset(actor: bool = True):
+def _reset(actor: bool = True, damping: bool = False):
     """16 robots reset with the delay drawn over 0-20 ms (0-4 physics steps) and observed (by
-    the actor too, or the critic alone)."""
+    the actor too, or the critic alone), with `damping` the joints' damping drawn over [0.1, 2]
+    and observed by the critic alone."""
     atlas = terrains.build_cell_atlas([("straight", "test", 2)], 1, resolution=0.1,
                                       tile_size=10.0, border=1.0)
     cfg = EnvConfig(obs_action_delay=True, obs_action_delay_actor=actor, episode_length_s=6.0,
-                    randomization=RandomizationConfig(action_delay_s=(0.0, 0.02)))
+                    obs_joint_damping=damping, randomization=RandomizationConfig(
+                        action_delay_s=(0.0, 0.02), joint_damping=(0.1, 2.0) if damping else ()))
     env = StairEnv(atlas, cfg)
     reset = jax.jit(jax.vmap(env.reset_at))
     return env, reset(jax.random.split(jax.random.PRNGKey(0), B), jnp.zeros(B, jnp.int32),
@@ -60,20 +62,42 @@ def test_each_robot_observes_the_delay_it_drew(reset_states):
     assert set(np.round(want, 6).tolist()) <= {0.0, 0.25, 0.5, 0.75, 1.0}
 
 
-def test_an_asymmetric_critic_alone_reads_the_delay(reset_states):
-    """env.obs_action_delay_actor false: the actor reads 0 where the critic reads the delay;
-    every other entry as with the delay observed by both."""
+def test_an_asymmetric_critic_alone_reads_the_delay_and_the_damping(reset_states):
+    """env.obs_action_delay_actor false, env.obs_joint_damping: the actor reads 0 where the
+    critic reads the delay and the damping each robot drew; every other entry as with the delay
+    observed by both."""
     with pytest.raises(ConfigError, match="obs_action_delay_actor"):
         EnvConfig(obs_action_delay_actor=False)  # nothing to hide
+    with pytest.raises(ConfigError, match="obs_joint_damping"):
+        EnvConfig(obs_joint_damping=1)
     _, told = reset_states
-    _, blind = _reset(actor=False)
-    at = observation.N_VEC
-    np.testing.assert_array_equal(np.asarray(blind.obs["state"])[:, at], 0.0)
-    np.testing.assert_array_equal(np.asarray(blind.obs["privileged_state"]),
+    env, blind = _reset(actor=False, damping=True)  # and the damping the critic's alone
+    at = observation.N_VEC  # the delay, then the damping
+    state, priv = np.asarray(blind.obs["state"]), np.asarray(blind.obs["privileged_state"])
+    np.testing.assert_array_equal(state[:, at:at + 2], 0.0)
+    np.testing.assert_array_equal(np.delete(priv, at + 1, 1),
                                   np.asarray(told.obs["privileged_state"]))
+    drawn = np.asarray(blind.info["joint_damping"])
+    assert drawn.min() >= 0.1 and drawn.max() <= 2.0 and drawn.std() > 0.2
+    np.testing.assert_allclose(priv[:, at + 1], drawn, rtol=1e-6)
     assert np.asarray(told.obs["state"])[:, at].max() > 0  # the draws reach the told actor
-    np.testing.assert_array_equal(np.delete(np.asarray(blind.obs["state"]), at, 1),
-                                  np.delete(np.asarray(told.obs["state"]), at, 1))
+    widths = np.concatenate([np.full(t.size, getattr(env.config.noise, t.noise) if t.noise
+                                     else 0.0) for t in observation.of_config(env.config)])
+    gap = np.abs(np.delete(state - priv, [at, at + 1], 1))  # elsewhere the actor's noise alone
+    assert np.all(gap <= np.delete(widths, [at, at + 1]) + 1e-6) and gap.max() > 0
+    m = symmetry.of_config(blind_cfg := EnvConfig(obs_action_delay=True, obs_joint_damping=True))
+    assert m.obs.index[at + 1] == at + 1 and observation.n_vec_of(blind_cfg) == at + 2
+
+
+@pytest.mark.parametrize("saved, delay, damping, widens", [
+    ({}, False, True, True),  # the damping added
+    ({}, True, True, True),  # both added
+    ({"obs_action_delay": True}, True, True, True),  # the damping after the saved delay
+    ({"obs_joint_damping": True}, True, True, False),  # the delay would go before it
+    ({"obs_joint_damping": True}, False, True, False),  # nothing added
+])
+def test_the_damping_term_widens_only_where_appended(saved, delay, damping, widens):
+    assert trainer.appends_terms(saved, 0, delay, damping) is widens
 
 
 @pytest.mark.parametrize("saved, history, delay, widens", [

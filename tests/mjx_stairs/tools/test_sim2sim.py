@@ -285,28 +285,41 @@ def test_the_delay_term_is_the_latency_the_runner_applies(delay_onnx, latency_ms
     assert np.abs(onnx(other) - onnx(ours)).max() > 1e-4  # the network reads it
 
 
-def test_a_delay_the_critic_alone_read_is_written_as_zero(delay_onnx, tmp_path):
-    """env.obs_action_delay_actor false: the sidecar gives the term scale 0, so sim2sim writes 0
-    there at any latency, as the training env's actor observation holds."""
+@pytest.mark.parametrize("term", ["action_delay", "joint_damping"])
+def test_a_term_the_critic_alone_read_is_written_as_zero(delay_onnx, tmp_path, term):
+    """env.obs_action_delay_actor false, or env.obs_joint_damping (the same one float at the
+    vector part's end): the sidecar gives the term scale 0, so sim2sim writes 0 there at any
+    latency, as the training env's actor observation holds; a sidecar that gives the damping a
+    scale is refused."""
     _, policy = delay_onnx
     meta = copy.deepcopy(policy.metadata)
-    meta["config"]["env"]["obs_action_delay_actor"] = False
-    export.export_policy(policy._replace(metadata=meta), tmp_path / "policy.onnx")
-    c = ct.load_contract(tmp_path / "policy.onnx")
-    side = json.loads(ct.sidecar_path(tmp_path / "policy.onnx").read_text())["observation"]
-    assert c.delay_scale == 0.0 and "write 0" in side["action_delay"]
+    meta["config"]["env"].update({"obs_action_delay_actor": False} if term == "action_delay"
+                                 else {"obs_action_delay": False, "obs_joint_damping": True})
+    onnx_path = tmp_path / "policy.onnx"
+    export.export_policy(policy._replace(metadata=meta), onnx_path)
+    c = ct.load_contract(onnx_path)
+    side = json.loads(ct.sidecar_path(onnx_path).read_text())
+    entry = next(e for e in side["observation"]["layout"] if e["name"] == term)
+    assert entry["scale"] == 0.0 and "actor read" in entry["description"]
+    assert c.delay_scale == (0.0 if term == "action_delay" else None)
     cfg = evaluation_config(env_config_from(meta["config"]["env"]))
-    assert not cfg.obs_action_delay_actor
-    ours = _sim(tmp_path / "policy.onnx", latency_ms=20.0).observe()
+    ours = _sim(onnx_path, latency_ms=20.0).observe()
     atlas = terrains.build_cell_atlas([("straight", "test", 0)], 1, resolution=0.1,
                                       tile_size=10.0, border=1.0)
     qpos = np.concatenate([atlas.spawn[0][:2], [0.4, 1.0, 0, 0, 0], rb.NOMINAL_JOINT_POS])
     info = {"tile": jnp.int32(0), "last_action": jnp.zeros(12),
-            **observation.history_start(1, jnp.zeros(12)), "delay_steps": jnp.int32(4)}
+            **observation.history_start(1, jnp.zeros(12)), "delay_steps": jnp.int32(4),
+            "joint_damping": jnp.float32(1.5)}
     obs = StairEnv(atlas, cfg).observe(jnp.asarray(qpos, jnp.float32), jnp.zeros(18), info)
-    sl = c.slices["action_delay"]
+    sl = c.slices[term]
     assert ours[sl] == [0.0] and float(np.asarray(obs["state"])[sl][0]) == 0.0
-    assert float(np.asarray(obs["privileged_state"])[sl][0]) == pytest.approx(1.0)
+    assert float(np.asarray(obs["privileged_state"])[sl][0]) == pytest.approx(
+        1.0 if term == "action_delay" else 1.5)
+    if term == "joint_damping":
+        entry["scale"] = 1.0
+        ct.sidecar_path(onnx_path).write_text(json.dumps(side))
+        with pytest.raises(ct.ContractError, match="critic's alone"):
+            ct.load_contract(onnx_path)
 
 
 def test_motors_in_sdk_order_give_the_same_torque_on_every_named_joint(onnx_file, tmp_path):
