@@ -96,8 +96,7 @@ DELAY_TERM = ObsTerm(
 
 DAMPING_TERM = ObsTerm(
     "joint_damping", 1, "N m s/rad", None, 1.0,
-    "the leg joints' passive damping (training's drawn or set value): the critic's alone, the "
-    "actor reads 0 here")
+    "the leg joints' passive damping (training's drawn or set value)")
 """With env.obs_joint_damping, after the delay term: a privileged input of the critic."""
 
 
