@@ -292,6 +292,11 @@ def evaluation_config(config: EnvConfig, episode_length_s: float | None = None) 
     )
 
 
+def leg_damping(robot: rb.RobotConfig) -> float:
+    """N m s/rad on every leg joint of a robot config: its joint_damping, else the MJCF's."""
+    return rb.JOINT_DAMPING if robot.joint_damping is None else robot.joint_damping
+
+
 def env_config_from(saved: dict[str, Any] | None, overrides: Sequence[str] = ()) -> EnvConfig:
     """The EnvConfig of a saved env table (a policy's, see rl.policy.saved_config; None: the
     defaults) with ``overrides`` ("robot.physics=reference", ...) applied."""

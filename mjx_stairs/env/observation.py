@@ -14,8 +14,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from mjx_stairs.env.config import HeightMapConfig, NoiseConfig
-from mjx_stairs.sim import robot as rb
+from mjx_stairs.env.config import HeightMapConfig, NoiseConfig, leg_damping
 
 
 class ObsTerm(NamedTuple):
@@ -146,9 +145,14 @@ def of_config(config) -> tuple[ObsTerm, ...]:
                  config.obs_joint_damping)
 
 
+def vector_of(config) -> tuple[ObsTerm, ...]:
+    """The vector part of the observation an env of this EnvConfig builds, in order."""
+    return vector_terms(config.obs_history, config.obs_action_delay, config.obs_joint_damping)
+
+
 def n_vec_of(config) -> int:
     """Length of the vector part of the observation an env of this EnvConfig builds."""
-    return n_vec(config.obs_history, config.obs_action_delay, config.obs_joint_damping)
+    return sum(t.size for t in vector_of(config))
 
 
 def critic_only(config) -> tuple[str, ...]:
@@ -161,15 +165,14 @@ def critic_only(config) -> tuple[str, ...]:
 def robot_values(config, info: dict) -> dict[str, jnp.ndarray]:
     """The robot's own terms that an env config observes, from its reset draws in `info`: the
     action delay (whole physics steps, in s) and the joints' damping (where not drawn, the
-    robot's: env.robot.joint_damping, else the MJCF's)."""
+    robot's: config.leg_damping)."""
     out = {}
     if config.obs_action_delay:
         steps = info.get("delay_steps", jnp.zeros((), jnp.int32))
         out[DELAY_TERM.name] = (steps * config.robot.timestep).astype(jnp.float32)[None]
     if config.obs_joint_damping:
-        fixed = config.robot.joint_damping
-        out[DAMPING_TERM.name] = jnp.asarray(info.get("joint_damping", rb.JOINT_DAMPING if fixed
-                                                      is None else fixed), jnp.float32).reshape(1)
+        out[DAMPING_TERM.name] = jnp.asarray(info.get("joint_damping", leg_damping(config.robot)),
+                                             jnp.float32).reshape(1)
     return out
 
 

@@ -21,16 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_stairs.env import observation
+from mjx_stairs.env.config import env_config_from
 from mjx_stairs.rl.policy import Policy, normaliser_constants, policy_action, saved_config
 
 
 def term_slices(policy: Policy) -> dict[str, slice]:
     """{term name: its slice of the actor observation} from the env config saved in the policy
     file; the height map as one term."""
-    env = saved_config(policy, "env") or {}
-    out = observation.slices(observation.vector_terms(int(env.get("obs_history", 0)),
-                                                     bool(env.get("obs_action_delay", False)),
-                                                     bool(env.get("obs_joint_damping", False))))
+    out = observation.slices(observation.vector_of(env_config_from(saved_config(policy, "env"))))
     at = max(sl.stop for sl in out.values())
     if at != policy.layout.n_vec:
         raise ValueError(f"the policy's saved env config gives {at} vector inputs, its layout "

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from mjx_stairs.env import observation
-from mjx_stairs.env.config import EnvConfig, env_config_from
+from mjx_stairs.env.config import EnvConfig, env_config_from, leg_damping
 from mjx_stairs.rl.policy import STD_EPS, Policy, normaliser_constants, saved_config
 from mjx_stairs.sim import robot as rb
 from mjx_stairs.sim import solref
@@ -117,7 +117,7 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
     """What the policy was trained to withstand (issue 24), for a runner to compare its robot
     with; none of it changes what the runner computes."""
     r, n, route = cfg.randomization, cfg.noise, cfg.route
-    damping = rb.JOINT_DAMPING if cfg.robot.joint_damping is None else cfg.robot.joint_damping
+    damping = leg_damping(cfg.robot)
     return {
         "joint_damping_nms_rad": list(r.joint_damping) if r.enabled and r.joint_damping
         else [damping, damping],
