@@ -171,12 +171,14 @@ def policy_value(policy: Policy, critic_obs: jax.Array) -> jax.Array:
                             policy.layout)
 
 
-def normaliser_constants(policy: Policy) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """(mean [D], std + STD_EPS [D], clip) of the actor stream as the policy applies them, or
-    None when the policy does not normalise observations."""
+def normaliser_constants(policy: Policy, stream: str = "state"
+                         ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(mean [D], std + STD_EPS [D], clip) of one observation stream (OBS_KEYS: the actor's
+    "state", the critic's "privileged_state") as the policy applies them, or None when the
+    policy does not normalise observations."""
     if not policy.network.normalize_obs:
         return None
-    stats = jax.tree_util.tree_map(np.asarray, policy.normalizer["state"])
+    stats = jax.tree_util.tree_map(np.asarray, policy.normalizer[stream])
     mean = np.asarray(stats.mean, np.float32)
     denom = np.asarray(normalizer.std(stats) + normalizer.STD_EPS, np.float32)
     return mean, denom, float(policy.network.obs_clip)

@@ -11,7 +11,10 @@ normal draw, so every input is where training saw it):
 - `d_action_1std`: the mean absolute change of the action (every joint, policy units) when every
   input of the term moves up by one of its stds, the same step in the normalised units the
   network sees for every term;
-- for the action delay, `d_action_0_to_20ms`: the same when the delay goes from 0 to 20 ms.
+- for the action delay, `d_action_0_to_20ms`: the same when the delay goes from 0 to 20 ms;
+- `critic_row_norm`, `d_value_1std`: the same two for the critic's first layer and its value,
+  over draws from the critic's own normaliser (a term the critic alone reads, the actor's input
+  0 there, is read in these columns alone).
 """
 
 from __future__ import annotations
@@ -22,7 +25,13 @@ import numpy as np
 
 from mjx_stairs.env import observation
 from mjx_stairs.env.config import env_config_from
-from mjx_stairs.rl.policy import Policy, normaliser_constants, policy_action, saved_config
+from mjx_stairs.rl.policy import (
+    Policy,
+    normaliser_constants,
+    policy_action,
+    policy_value,
+    saved_config,
+)
 
 
 def term_slices(policy: Policy) -> dict[str, slice]:
@@ -38,45 +47,71 @@ def term_slices(policy: Policy) -> dict[str, slice]:
     return out
 
 
-def input_use(policy: Policy, samples: int = 512, seed: int = 0) -> dict[str, dict[str, float]]:
-    """{term: {"row_norm", "d_action_1std"[, "d_action_0_to_20ms"]}} (module docstring)."""
-    constants = normaliser_constants(policy)
+def _draws(policy: Policy, stream: str, samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(`samples` observations of one stream, each input at its running mean plus its std times
+    a standard normal draw; that std [D])."""
+    constants = normaliser_constants(policy, stream)
     if constants is None:
         raise ValueError("input_use draws observations from the policy's normaliser; this "
                          "policy does not normalise its observations")
     mean, std = (np.asarray(c, np.float64) for c in constants[:2])  # std: + STD_EPS
-    obs = mean + std * np.random.default_rng(seed).standard_normal((samples, mean.size))
-    act = jax.jit(jax.vmap(lambda o: policy_action(policy, o)))
-    base = np.asarray(act(jnp.asarray(obs, jnp.float32)))
+    return mean + std * np.random.default_rng(seed).standard_normal((samples, mean.size)), std
 
-    def action_with(sl: slice, value: np.ndarray | float) -> np.ndarray:
+
+def _reads(policy: Policy, head: str, fn, obs: np.ndarray, std: np.ndarray) -> dict:
+    """{term: (first-layer row norm of `head`, mean abs change of fn's output at term + 1 std)}
+    with the change from 0 to 20 ms for the action delay under "0_to_20ms"."""
+    out_of = jax.jit(jax.vmap(fn))
+    base = np.asarray(out_of(jnp.asarray(obs, jnp.float32)))
+
+    def change(sl: slice, value, reference=base) -> float:
         o = obs.copy()
         o[:, sl] = value
-        return np.asarray(act(jnp.asarray(o, jnp.float32)))
+        return float(np.abs(np.asarray(out_of(jnp.asarray(o, jnp.float32))) - reference).mean())
 
-    first = np.asarray(policy.params["actor"][0]["w"])
+    first = np.asarray(policy.params[head][0]["w"])
     latent = first.shape[0] - policy.layout.n_vec  # rows: [encoder latent | vec]
     out = {}
     for name, sl in term_slices(policy).items():
         rows = first[latent + sl.start:latent + sl.stop]
         row = (float(np.linalg.norm(rows) / np.sqrt(len(rows))) if name != "height_map"
                else float("nan"))
-        step = action_with(sl, obs[:, sl] + std[sl])
-        out[name] = {"row_norm": row, "d_action_1std": float(np.abs(step - base).mean())}
+        out[name] = {"row": row, "1std": change(sl, obs[:, sl] + std[sl])}
         if name == observation.DELAY_TERM.name:
-            a0, a20 = action_with(sl, 0.0), action_with(sl, observation.DELAY_SCALE * 0.02)
-            out[name]["d_action_0_to_20ms"] = float(np.abs(a20 - a0).mean())
+            o0 = obs.copy()
+            o0[:, sl] = 0.0
+            at0 = np.asarray(out_of(jnp.asarray(o0, jnp.float32)))
+            out[name]["0_to_20ms"] = change(sl, observation.DELAY_SCALE * 0.02, at0)
+    return out
+
+
+def input_use(policy: Policy, samples: int = 512, seed: int = 0) -> dict[str, dict[str, float]]:
+    """{term: {"row_norm", "d_action_1std", "critic_row_norm", "d_value_1std"[,
+    "d_action_0_to_20ms"]}} (module docstring); the critic's from its own stream's normaliser,
+    so a term the critic alone reads (the actor's input 0 there) shows in its columns alone."""
+    actor = _reads(policy, "actor", lambda o: policy_action(policy, o),
+                   *_draws(policy, "state", samples, seed))
+    critic = _reads(policy, "critic", lambda o: policy_value(policy, o),
+                    *_draws(policy, "privileged_state", samples, seed))
+    out = {}
+    for name, a in actor.items():
+        out[name] = {"row_norm": a["row"], "d_action_1std": a["1std"],
+                     "critic_row_norm": critic[name]["row"], "d_value_1std": critic[name]["1std"]}
+        if "0_to_20ms" in a:
+            out[name]["d_action_0_to_20ms"] = a["0_to_20ms"]
     return out
 
 
 def markdown(use: dict[str, dict[str, float]]) -> str:
     """The table of input_use's result."""
     lines = ["| term | first-layer row norm (rms per input) | mean abs action change, term + 1 "
-             "std |",
-             "|---|---|---|"]
+             "std | critic's first-layer row norm | mean abs value change, term + 1 std |",
+             "|---|---|---|---|---|"]
     for name, u in use.items():
-        row = "-" if np.isnan(u["row_norm"]) else f"{u['row_norm']:.3f}"
-        lines.append(f"| {name} | {row} | {u['d_action_1std']:.4f} |")
+        row, crow = ("-" if np.isnan(u[k]) else f"{u[k]:.3f}" for k in ("row_norm",
+                                                                          "critic_row_norm"))
+        lines.append(f"| {name} | {row} | {u['d_action_1std']:.4f} | {crow} | "
+                     f"{u['d_value_1std']:.4f} |")
     for name, u in use.items():
         if "d_action_0_to_20ms" in u:
             lines.append(f"\n{name} from 0 to 20 ms: mean abs action change "
