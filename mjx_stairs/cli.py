@@ -226,7 +226,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from mjx_stairs.tools import export
 
     return export.export_command(args.checkpoint, args.onnx, check=args.verify,
-                                 observation=args.observation)
+                                 observation=args.observation, pd=args.pd)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -368,6 +368,9 @@ def _add_tools(sub) -> None:
                     help="what the robot's perception gives beyond training, listed in the "
                          "sidecar: height_map.occlusion_samples (the wall rule), "
                          "height_map.sensor_height")
+    ex.add_argument("--pd", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="the robot's PD gains where they differ from training, listed in the "
+                         "sidecar: kd (adds to the joints' damping; docs/deploy.md)")
     ex.set_defaults(fn=cmd_export)
     sim2sim_cli.add_parser(sub)
 

@@ -229,6 +229,22 @@ def verify(policy: Policy, onnx_path: str | os.PathLike, n: int = 64,
 # the observation that `export --observation` may change (the wall rule: docs/deploy.md,
 # "Nothing behind a wall"; docs/results.md 8x: a policy trained without it does better with it).
 OBSERVATION_KEYS = ("height_map.occlusion_samples", "height_map.sensor_height")
+# What the robot's joint controller sets: `export --pd kd=VALUE`, the PD's damping gain, which
+# adds to the joints' own damping (docs/deploy.md, "The PD's damping for a measured latency").
+PD_KEYS = ("kd",)
+
+
+def _with_env(policy: Policy, overrides: Sequence[str], flag: str, meta_key: str) -> Policy:
+    """The policy with its saved env config changed by `overrides` (checked by the caller),
+    listed in its metadata under `meta_key`; a value the config refuses is an ExportError."""
+    try:
+        cfg = env_config_from(saved_config(policy, "env"), overrides)
+    except ConfigError as e:
+        raise ExportError(f"{flag}: {e}") from None
+    meta = dict(policy.metadata)
+    meta["config"] = {**meta.get("config", {}), "env": to_dict(cfg)}
+    meta[meta_key] = [*meta.get(meta_key, []), *overrides]
+    return policy._replace(metadata=meta)
 
 
 def with_observation(policy: Policy, overrides: Sequence[str]) -> Policy:
@@ -241,25 +257,43 @@ def with_observation(policy: Policy, overrides: Sequence[str]) -> Policy:
         if item.partition("=")[0].strip() not in OBSERVATION_KEYS or "=" not in item:
             raise ExportError(f"--observation '{item}': expected KEY=VALUE with KEY one of "
                               f"{', '.join(OBSERVATION_KEYS)}")
-    try:
-        cfg = env_config_from(saved_config(policy, "env"), overrides)
-    except ConfigError as e:
-        raise ExportError(f"--observation: {e}") from None
-    meta = dict(policy.metadata)
-    meta["config"] = {**meta.get("config", {}), "env": to_dict(cfg)}
-    meta["observation_overrides"] = [*meta.get("observation_overrides", []), *overrides]
-    return policy._replace(metadata=meta)
+    return _with_env(policy, overrides, "--observation", "observation_overrides")
+
+
+def with_pd(policy: Policy, items: Sequence[str]) -> Policy:
+    """The policy with its PD gains changed for the robot (KEY=VALUE, KEY in PD_KEYS, a finite
+    value >= 0), listed in its metadata (`pd_overrides`, as `robot.KEY=VALUE`) beside the gains
+    it trained with (`pd_trained`), which the sidecar reports; a bad item is an ExportError."""
+    if not items:
+        return policy
+    overrides = []
+    for item in items:
+        key, eq, value = (part.strip() for part in item.partition("="))
+        if key not in PD_KEYS or not eq:
+            raise ExportError(f"--pd '{item}': expected KEY=VALUE with KEY one of "
+                              f"{', '.join(PD_KEYS)}")
+        try:
+            number = float(value)
+        except ValueError:
+            number = float("nan")
+        if not (np.isfinite(number) and number >= 0):
+            raise ExportError(f"--pd '{item}': {key} must be a finite number >= 0")
+        overrides.append(f"robot.{key}={number}")
+    trained = env_config_from(saved_config(policy, "env")).robot
+    out = _with_env(policy, overrides, "--pd", "pd_overrides")
+    out.metadata.setdefault("pd_trained", {"kp": trained.kp, "kd": trained.kd})
+    return out
 
 
 def export_command(checkpoint: str, onnx_path: str, check: bool = False,
-                   observation: Sequence[str] = ()) -> int:
-    """`mjx-stairs export`: write the graph and sidecar (with the `observation` overrides, see
-    with_observation), optionally check them against JAX on 64 random observations; exit status
-    0, 1 (the graph disagrees) or 2 (bad input)."""
+                   observation: Sequence[str] = (), pd: Sequence[str] = ()) -> int:
+    """`mjx-stairs export`: write the graph and sidecar (with the `observation` and `pd`
+    overrides, see with_observation and with_pd), optionally check them against JAX on 64 random
+    observations; exit status 0, 1 (the graph disagrees) or 2 (bad input)."""
     import sys
 
     try:
-        policy = with_observation(load_policy(checkpoint), observation)
+        policy = with_pd(with_observation(load_policy(checkpoint), observation), pd)
         export_policy(policy, onnx_path)
         print(f"wrote {onnx_path} and {sidecar_path(onnx_path)}", flush=True)
         if check:

@@ -285,6 +285,7 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
             "torque_limit_nm": _floats(rb.TORQUE_LIMIT * robot.torque_scale),
             "law": "tau = clip(kp * (q_target - q) - kd * qd, -torque_limit, torque_limit), "
                    "evaluated every physics step",
+            "trained": meta.get("pd_trained") or {"kp": robot.kp, "kd": robot.kd},
         },
         "rates": {
             "control_hz": 1.0 / dt, "control_dt_s": dt,
@@ -298,5 +299,6 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
         "versions": versions(),
         "policy": {"iteration": meta.get("iteration"), "env_steps": meta.get("env_steps"),
                    "network": meta.get("network"), "config": meta.get("config"),
-                   "observation_overrides": meta.get("observation_overrides", [])},
+                   "observation_overrides": meta.get("observation_overrides", []),
+                   "pd_overrides": meta.get("pd_overrides", [])},
     }

@@ -366,6 +366,46 @@ def test_cli_export_with_the_wall_rule_writes_it_into_the_sidecar(policy_file, t
     assert contract.load_contract(ruled).hm_occlusion == 16
 
 
+def test_cli_export_with_the_robots_kd_writes_it_and_the_trained_gains(policy_file, tmp_path):
+    """`--pd kd=VALUE`: the sidecar's PD law carries the robot's damping gain, says what the
+    policy trained with, and the robot side (the contract) runs it; the graph is the same."""
+    plain, damped = tmp_path / "plain.onnx", tmp_path / "damped.onnx"
+    assert cli.main(["export", "--checkpoint", str(policy_file), "--onnx", str(plain),
+                     "--no-verify"]) == 0
+    assert cli.main(["export", "--checkpoint", str(policy_file), "--onnx", str(damped),
+                     "--no-verify", "--pd", "kd=2.5"]) == 0
+    side0, side = (json.loads((tmp_path / f"{n}.onnx.json").read_text())
+                   for n in ("plain", "damped"))
+    kp, kd = side0["pd"]["kp"], side0["pd"]["kd"]
+    assert kd != 2.5 and side0["pd"]["trained"] == {"kp": kp, "kd": kd}
+    assert side0["policy"]["pd_overrides"] == []
+    assert (side["pd"]["kp"], side["pd"]["kd"]) == (kp, 2.5)
+    assert side["pd"]["trained"] == {"kp": kp, "kd": kd}
+    assert side["policy"]["pd_overrides"] == ["robot.kd=2.5"]
+    assert plain.read_bytes() == damped.read_bytes()
+    from mjx_stairs.tools import contract
+    c = contract.load_contract(damped)
+    q, qd = np.zeros(12), np.full(12, 0.1)
+    np.testing.assert_allclose(contract.pd_torque(c, q, q, qd), -0.25 * np.ones(12))
+
+
+@pytest.mark.parametrize("item,why", [
+    ("kp=20", "expected KEY=VALUE with KEY one of kd"),
+    ("kd", "expected KEY=VALUE with KEY one of kd"),
+    ("kd=-1", "kd must be a finite number >= 0"),
+    ("kd=soft", "kd must be a finite number >= 0"),
+    ("kd=nan", "kd must be a finite number >= 0"),
+])
+def test_cli_export_refuses_a_pd_setting_it_cannot_carry(policy_file, tmp_path, capsys, item,
+                                                        why):
+    code = cli.main(["export", "--checkpoint", str(policy_file), "--onnx",
+                     str(tmp_path / "p.onnx"), "--pd", item])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("mjx-stairs export: error:")
+    assert why in err[0]
+    assert not (tmp_path / "p.onnx").exists()
+
+
 @pytest.mark.parametrize("item,why", [
     ("height_map.size=11", "expected KEY=VALUE with KEY one of"),
     ("robot.joint_damping=2.0", "expected KEY=VALUE with KEY one of"),
