@@ -234,9 +234,11 @@ OBSERVATION_KEYS = ("height_map.occlusion_samples", "height_map.sensor_height")
 PD_KEYS = ("kd",)
 
 
-def _with_env(policy: Policy, overrides: Sequence[str], flag: str, meta_key: str) -> Policy:
+def _with_env(policy: Policy, overrides: Sequence[str], flag: str, meta_key: str,
+              **first: Any) -> Policy:
     """The policy with its saved env config changed by `overrides` (checked by the caller),
-    listed in its metadata under `meta_key`; a value the config refuses is an ExportError."""
+    listed in its metadata under `meta_key`, and each `first` entry set where the metadata has
+    none yet; a value the config refuses is an ExportError."""
     try:
         cfg = env_config_from(saved_config(policy, "env"), overrides)
     except ConfigError as e:
@@ -244,7 +246,7 @@ def _with_env(policy: Policy, overrides: Sequence[str], flag: str, meta_key: str
     meta = dict(policy.metadata)
     meta["config"] = {**meta.get("config", {}), "env": to_dict(cfg)}
     meta[meta_key] = [*meta.get(meta_key, []), *overrides]
-    return policy._replace(metadata=meta)
+    return policy._replace(metadata={**first, **meta})
 
 
 def with_observation(policy: Policy, overrides: Sequence[str]) -> Policy:
@@ -280,9 +282,8 @@ def with_pd(policy: Policy, items: Sequence[str]) -> Policy:
             raise ExportError(f"--pd '{item}': {key} must be a finite number >= 0")
         overrides.append(f"robot.{key}={number}")
     trained = env_config_from(saved_config(policy, "env")).robot
-    out = _with_env(policy, overrides, "--pd", "pd_overrides")
-    out.metadata.setdefault("pd_trained", {"kp": trained.kp, "kd": trained.kd})
-    return out
+    return _with_env(policy, overrides, "--pd", "pd_overrides",
+                     pd_trained={"kp": trained.kp, "kd": trained.kd})
 
 
 def export_command(checkpoint: str, onnx_path: str, check: bool = False,
