@@ -152,7 +152,7 @@ def vector_of(config) -> tuple[ObsTerm, ...]:
 
 def n_vec_of(config) -> int:
     """Length of the vector part of the observation an env of this EnvConfig builds."""
-    return sum(t.size for t in vector_of(config))
+    return n_vec(config.obs_history, config.obs_action_delay, config.obs_joint_damping)
 
 
 def critic_only(config) -> tuple[str, ...]:

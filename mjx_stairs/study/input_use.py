@@ -62,13 +62,17 @@ def _reads(policy: Policy, head: str, fn, obs: np.ndarray, std: np.ndarray) -> d
     """{term: (first-layer row norm of `head`, mean abs change of fn's output at term + 1 std)}
     with the change from 0 to 20 ms for the action delay under "0_to_20ms"."""
     out_of = jax.jit(jax.vmap(fn))
-    base = np.asarray(out_of(jnp.asarray(obs, jnp.float32)))
 
-    def change(sl: slice, value, reference=base) -> float:
+    def output_with(sl: slice | None = None, value=None) -> np.ndarray:
         o = obs.copy()
-        o[:, sl] = value
-        return float(np.abs(np.asarray(out_of(jnp.asarray(o, jnp.float32))) - reference).mean())
+        if sl is not None:
+            o[:, sl] = value
+        return np.asarray(out_of(jnp.asarray(o, jnp.float32)))
 
+    def mean_abs(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.abs(a - b).mean())
+
+    base = output_with()
     first = np.asarray(policy.params[head][0]["w"])
     latent = first.shape[0] - policy.layout.n_vec  # rows: [encoder latent | vec]
     out = {}
@@ -76,12 +80,10 @@ def _reads(policy: Policy, head: str, fn, obs: np.ndarray, std: np.ndarray) -> d
         rows = first[latent + sl.start:latent + sl.stop]
         row = (float(np.linalg.norm(rows) / np.sqrt(len(rows))) if name != "height_map"
                else float("nan"))
-        out[name] = {"row": row, "1std": change(sl, obs[:, sl] + std[sl])}
+        out[name] = {"row": row, "1std": mean_abs(output_with(sl, obs[:, sl] + std[sl]), base)}
         if name == observation.DELAY_TERM.name:
-            o0 = obs.copy()
-            o0[:, sl] = 0.0
-            at0 = np.asarray(out_of(jnp.asarray(o0, jnp.float32)))
-            out[name]["0_to_20ms"] = change(sl, observation.DELAY_SCALE * 0.02, at0)
+            out[name]["0_to_20ms"] = mean_abs(output_with(sl, observation.DELAY_SCALE * 0.02),
+                                              output_with(sl, 0.0))
     return out
 
 

@@ -389,33 +389,22 @@ def test_cli_export_with_the_robots_kd_writes_it_and_the_trained_gains(policy_fi
     np.testing.assert_allclose(contract.pd_torque(c, q, q, qd), -0.25 * np.ones(12))
 
 
-@pytest.mark.parametrize("item,why", [
-    ("kp=20", "expected KEY=VALUE with KEY one of kd"),
-    ("kd", "expected KEY=VALUE with KEY one of kd"),
-    ("kd=-1", "kd must be a finite number >= 0"),
-    ("kd=soft", "kd must be a finite number >= 0"),
-    ("kd=nan", "kd must be a finite number >= 0"),
+@pytest.mark.parametrize("flag,item,why", [
+    ("--observation", "height_map.size=11", "expected KEY=VALUE with KEY one of"),
+    ("--observation", "robot.joint_damping=2.0", "expected KEY=VALUE with KEY one of"),
+    ("--observation", "height_map.occlusion_samples", "expected KEY=VALUE with KEY one of"),
+    ("--observation", "height_map.occlusion_samples=many", "occlusion_samples"),
+    ("--pd", "kp=20", "expected KEY=VALUE with KEY one of kd"),
+    ("--pd", "kd", "expected KEY=VALUE with KEY one of kd"),
+    ("--pd", "kd=-1", "kd must be a finite number >= 0"),
+    ("--pd", "kd=soft", "kd must be a finite number >= 0"),
+    ("--pd", "kd=nan", "kd must be a finite number >= 0"),
 ])
-def test_cli_export_refuses_a_pd_setting_it_cannot_carry(policy_file, tmp_path, capsys, item,
-                                                        why):
+def test_cli_export_refuses_a_setting_it_cannot_carry(policy_file, tmp_path, capsys, flag, item,
+                                                      why):
+    """`--observation` takes only observation settings, `--pd` only a finite kd >= 0."""
     code = cli.main(["export", "--checkpoint", str(policy_file), "--onnx",
-                     str(tmp_path / "p.onnx"), "--pd", item])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and err[0].startswith("mjx-stairs export: error:")
-    assert why in err[0]
-    assert not (tmp_path / "p.onnx").exists()
-
-
-@pytest.mark.parametrize("item,why", [
-    ("height_map.size=11", "expected KEY=VALUE with KEY one of"),
-    ("robot.joint_damping=2.0", "expected KEY=VALUE with KEY one of"),
-    ("height_map.occlusion_samples", "expected KEY=VALUE with KEY one of"),
-    ("height_map.occlusion_samples=many", "occlusion_samples"),
-])
-def test_cli_export_refuses_what_is_not_an_observation_setting(policy_file, tmp_path, capsys,
-                                                              item, why):
-    code = cli.main(["export", "--checkpoint", str(policy_file), "--onnx",
-                     str(tmp_path / "p.onnx"), "--observation", item])
+                     str(tmp_path / "p.onnx"), flag, item])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith("mjx-stairs export: error:")
     assert why in err[0]
