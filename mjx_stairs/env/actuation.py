@@ -36,6 +36,15 @@ class Actuator:
         self._push_steps = (int(round(push / (config.robot.timestep * config.decimation)))
                             if push > 0 else 0)
 
+    def gains(self, info: dict) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+        """This robot's PD (kp, kd, torque limit [12]): the config's gains times its drawn
+        scales, kd raised by `robot.kd_per_delay` times its action delay (the gain scheduled by
+        the latency, as the sidecar's PD law tells the robot program)."""
+        r = self.config.robot
+        delay_s = r.timestep * info["delay_steps"] if "delay_steps" in info else 0.0
+        kd = (r.kd + r.kd_per_delay * delay_s) * info["kd_scale"]
+        return r.kp * info["kp_scale"], kd, self._torque_limit * info["motor_strength"]
+
     def __call__(self, data0: mjx.Data, action: jnp.ndarray,
                  info: dict) -> tuple[mjx.Data, jnp.ndarray]:
         """PD control over `decimation` physics steps (after a push, if one is due); a robot
@@ -45,9 +54,7 @@ class Actuator:
         c = self.config
         model = dr.robot_model(self._mx, self._ids, info, c.randomization)
         q_target = self._nominal + c.robot.action_scale * action
-        kp = c.robot.kp * info["kp_scale"]
-        kd = c.robot.kd * info["kd_scale"]
-        limit = self._torque_limit * info["motor_strength"]
+        kp, kd, limit = self.gains(info)
         qj, vj = self._ids.qpos_joints, self._ids.qvel_joints
         delayed = "delay_steps" in info
         before = self._nominal + c.robot.action_scale * info["last_action"] if delayed else None

@@ -84,15 +84,16 @@ def build_model(
 
 
 def _pd_actuators(spec: mujoco.MjSpec, config: rb.RobotConfig) -> None:
-    """Each joint's actuator as PD on its target (`config.kp` / `config.kd`), its force clamped at
-    the reference torque limit times `config.torque_scale`."""
+    """Each joint's actuator as PD on its target (`config.kp` / `config.delayed_kd`: kd at the
+    robot's action delay), its force clamped at the reference torque limit times
+    `config.torque_scale`."""
     limits = rb.TORQUE_LIMIT * config.torque_scale
     for joint, limit in zip(rb.JOINT_NAMES, limits, strict=True):
         act = next(a for a in spec.actuators if a.target == joint)
         act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         act.gainprm[0] = config.kp
         act.biastype = mujoco.mjtBias.mjBIAS_AFFINE
-        act.biasprm[:3] = [0.0, -config.kp, -config.kd]
+        act.biasprm[:3] = [0.0, -config.kp, -config.delayed_kd]
         act.forcelimited = True
         act.forcerange = [-float(limit), float(limit)]
 

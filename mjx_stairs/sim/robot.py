@@ -69,6 +69,9 @@ class RobotConfig:
 
     kp: float = 35.0  # PD stiffness (N m / rad), the paper's "stiff" variant
     kd: float = 1.0  # PD damping (N m s / rad)
+    # N m s/rad per s of the robot's action delay: the PD's damping scheduled by the measured
+    # latency, kd + kd_per_delay * delay (75: 1.0 at no delay, 2.5 at 20 ms; docs/deploy.md)
+    kd_per_delay: float = 0.0
     torque_scale: float = 1.0  # multiplies the reference torque limits of the PD (only) clamp
     action_scale: float = 0.5  # q_target = q_nominal + action_scale * action
     timestep: float = 0.005  # physics step (s)
@@ -109,6 +112,11 @@ class RobotConfig:
         """`action_delay_s` in whole physics steps."""
         return int(round(self.action_delay_s / self.timestep))
 
+    @property
+    def delayed_kd(self) -> float:
+        """The PD's damping at the fixed `action_delay_s` (kd_per_delay's schedule)."""
+        return self.kd + self.kd_per_delay * self.action_delay_steps * self.timestep
+
     def __post_init__(self):
         if self.sunk_exit not in ("top", "nearest"):
             raise ConfigError("config key 'env.robot.sunk_exit': must be 'top' or 'nearest', got "
@@ -116,6 +124,9 @@ class RobotConfig:
         if self.joint_damping is not None and not self.joint_damping >= 0:
             raise ConfigError("config key 'env.robot.joint_damping': must be >= 0 or none, got "
                               f"{self.joint_damping}")
+        if not (self.kd >= 0 and self.kd_per_delay >= 0):
+            raise ConfigError("config keys 'env.robot.kd', 'env.robot.kd_per_delay': must be >= 0,"
+                              f" got {self.kd}, {self.kd_per_delay}")
         if self.contact_timeconst and not self.contact_timeconst >= 2 * self.timestep:
             raise ConfigError("config key 'env.robot.contact_timeconst': must be 0 or at least "
                               f"twice robot.timestep, got {self.contact_timeconst}")
@@ -280,23 +291,11 @@ def add_heightfield(spec: mujoco.MjSpec, heights: np.ndarray, resolution: float,
     span = hi - lo
     data = (heights - lo) / span if span > 0 else np.zeros_like(heights)
     rx, ry = 0.5 * (nx - 1) * resolution, 0.5 * (ny - 1) * resolution
-    spec.add_hfield(
-        name=hfield_name,
-        nrow=ny,
-        ncol=nx,
-        size=[rx, ry, max(span, 1e-3), 0.5],
-        userdata=data.ravel().tolist(),
-    )
-    spec.worldbody.add_geom(
-        name="terrain",
-        type=mujoco.mjtGeom.mjGEOM_HFIELD,
-        hfieldname=hfield_name,
-        pos=[rx, ry, lo],
-        contype=0,
-        conaffinity=1,
-        material="terrain",
-        friction=[friction, 0.02, 0.01],
-    )
+    spec.add_hfield(name=hfield_name, nrow=ny, ncol=nx, size=[rx, ry, max(span, 1e-3), 0.5],
+                    userdata=data.ravel().tolist())
+    spec.worldbody.add_geom(name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD,
+                            hfieldname=hfield_name, pos=[rx, ry, lo], contype=0, conaffinity=1,
+                            material="terrain", friction=[friction, 0.02, 0.01])
 
 
 def robot_ids(model: mujoco.MjModel) -> RobotIds:

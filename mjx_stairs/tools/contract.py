@@ -49,6 +49,7 @@ class Contract:
     nominal: np.ndarray  # [12] rad
     kp: float
     kd: float
+    kd_per_delay: float  # N m s/rad per s of the robot's action delay, added to kd (pd_torque)
     torque_limit: np.ndarray  # [12] N m
     action_scale: float
     action_clip: float
@@ -145,6 +146,7 @@ def load_contract(onnx_path: str | os.PathLike) -> Contract:
         sdk_index=np.asarray(joints["sdk_index"], np.int64),
         nominal=np.asarray(joints["nominal_pos_rad"], np.float64),
         kp=float(pd["kp"]), kd=float(pd["kd"]),
+        kd_per_delay=float(pd.get("kd_per_delay_s", 0.0)),  # 0 in sidecars before 2026-11-30
         torque_limit=np.asarray(pd["torque_limit_nm"], np.float64),
         action_scale=float(act["scale"]), action_clip=float(act["clip"]),
         control_dt=float(rates["control_dt_s"]), physics_dt=float(rates["physics_dt_s"]),
@@ -347,9 +349,12 @@ def action_to_target(c: Contract, action: np.ndarray) -> tuple[np.ndarray, np.nd
     return a, c.nominal + c.action_scale * a
 
 
-def pd_torque(c: Contract, q_target: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """[12] N m: clip(kp (q* - q) - kd qd, -limit, limit), the sidecar's PD law."""
-    return np.clip(c.kp * (q_target - q) - c.kd * qd, -c.torque_limit, c.torque_limit)
+def pd_torque(c: Contract, q_target: np.ndarray, q: np.ndarray, qd: np.ndarray,
+              delay_s: float = 0.0) -> np.ndarray:
+    """[12] N m: clip(kp (q* - q) - (kd + kd_per_delay delay_s) qd, -limit, limit), the
+    sidecar's PD law at the robot's measured action delay `delay_s`."""
+    kd = c.kd + c.kd_per_delay * delay_s
+    return np.clip(c.kp * (q_target - q) - kd * qd, -c.torque_limit, c.torque_limit)
 
 
 def to_sdk(c: Contract, x: np.ndarray) -> np.ndarray:

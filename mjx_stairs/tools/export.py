@@ -230,8 +230,9 @@ def verify(policy: Policy, onnx_path: str | os.PathLike, n: int = 64,
 # "Nothing behind a wall"; docs/results.md 8x: a policy trained without it does better with it).
 OBSERVATION_KEYS = ("height_map.occlusion_samples", "height_map.sensor_height")
 # What the robot's joint controller sets: `export --pd kd=VALUE`, the PD's damping gain, which
-# adds to the joints' own damping (docs/deploy.md, "The PD's damping for a measured latency").
-PD_KEYS = ("kd",)
+# adds to the joints' own damping, and `kd_per_delay=VALUE`, its rise per second of the robot's
+# action delay (docs/deploy.md, "The PD's damping for a measured latency").
+PD_KEYS = ("kd", "kd_per_delay")
 
 
 def _with_env(policy: Policy, overrides: Sequence[str], flag: str, meta_key: str,
@@ -283,7 +284,7 @@ def with_pd(policy: Policy, items: Sequence[str]) -> Policy:
         overrides.append(f"robot.{key}={number}")
     trained = env_config_from(saved_config(policy, "env")).robot
     return _with_env(policy, overrides, "--pd", "pd_overrides",
-                     pd_trained={"kp": trained.kp, "kd": trained.kd})
+                     pd_trained=sidecar_lib.pd_gains(trained))
 
 
 def export_command(checkpoint: str, onnx_path: str, check: bool = False,

@@ -216,6 +216,11 @@ def versions() -> dict[str, str | None]:
     return out
 
 
+def pd_gains(robot: rb.RobotConfig) -> dict[str, float]:
+    """The PD gains a robot config trains or runs with, as the sidecar's `pd` names them."""
+    return {"kp": robot.kp, "kd": robot.kd, "kd_per_delay_s": robot.kd_per_delay}
+
+
 def _delay_range(cfg: EnvConfig) -> list[float]:
     r = cfg.randomization
     return (list(r.action_delay_s) if r.enabled and r.action_delay_s[1] > 0
@@ -281,11 +286,12 @@ def sidecar(policy: Policy, onnx_bytes: bytes | None = None) -> dict[str, Any]:
                     "clipped action back as last_action",
         },
         "pd": {
-            "kp": robot.kp, "kd": robot.kd,
+            "kp": robot.kp, "kd": robot.kd, "kd_per_delay_s": robot.kd_per_delay,
             "torque_limit_nm": _floats(rb.TORQUE_LIMIT * robot.torque_scale),
-            "law": "tau = clip(kp * (q_target - q) - kd * qd, -torque_limit, torque_limit), "
-                   "evaluated every physics step",
-            "trained": meta.get("pd_trained") or {"kp": robot.kp, "kd": robot.kd},
+            "law": "tau = clip(kp * (q_target - q) - (kd + kd_per_delay_s * delay_s) * qd, "
+                   "-torque_limit, torque_limit), evaluated every physics step; delay_s: the "
+                   "robot's measured action delay, observation to PD target taking effect",
+            "trained": meta.get("pd_trained") or pd_gains(robot),
         },
         "rates": {
             "control_hz": 1.0 / dt, "control_dt_s": dt,

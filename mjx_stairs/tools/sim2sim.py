@@ -191,7 +191,8 @@ class Sim:
     def apply_pd(self) -> np.ndarray:
         """Set each joint's motor (by name) to the PD torque [12] of the target in effect."""
         d, w = self.w.data, self.w
-        tau = ct.pd_torque(self.c, self.active, d.qpos[w.qpos_adr], d.qvel[w.dof_adr])
+        tau = ct.pd_torque(self.c, self.active, d.qpos[w.qpos_adr], d.qvel[w.dof_adr],
+                           delay_s=self.delay * w.model.opt.timestep)  # as the robot measured it
         d.ctrl[w.actuator] = tau / w.gear
         return tau
 

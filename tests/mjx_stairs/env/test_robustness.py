@@ -221,6 +221,31 @@ def test_pushes_come_only_over_the_flights(env):
     np.testing.assert_array_equal(np.asarray(calm), 0.0)
 
 
+def test_the_pd_damping_rises_with_each_robots_delay_as_scheduled(env):
+    """robot.kd_per_delay: the PD's kd is kd + kd_per_delay * the robot's action delay (drawn
+    per robot, or the fixed one), times its drawn kd scale; 0 (every config before): kd alone.
+    The ground truth's MuJoCo actuators carry the fixed delay's kd."""
+    from mjx_stairs.env.actuation import Actuator
+    from mjx_stairs.env.config import ConfigError
+    cfg = env_config_from(None, [*ROBUST, "robot.kd_per_delay=75"])
+    scheduled = Actuator(env.robot.mjx_model, env.robot.ids, cfg, env.terrain, env.tiles)
+    info = {"kp_scale": jnp.float32(1.0), "kd_scale": jnp.float32(1.1),
+            "motor_strength": jnp.ones(12)}
+    for steps in range(5):  # 0 .. 20 ms
+        at = dict(info, delay_steps=jnp.int32(steps))
+        kd = float(scheduled.gains(at)[1])
+        assert kd == pytest.approx(1.1 * (1.0 + 75.0 * 0.005 * steps), rel=1e-6)
+        assert float(env.actuate.gains(at)[1]) == pytest.approx(1.1, rel=1e-6)
+    assert float(scheduled.gains(info)[1]) == pytest.approx(1.1, rel=1e-6)  # no delay at all
+    fixed = rb.RobotConfig(kd_per_delay=75.0, action_delay_s=0.02)
+    assert fixed.delayed_kd == pytest.approx(2.5)
+    bias = box_world.build_model(np.zeros((0, 6)), fixed).actuator_biasprm[:, 2]
+    np.testing.assert_allclose(bias, -2.5)
+    with pytest.raises(ConfigError, match="kd_per_delay") as e:
+        env_config_from(None, ["robot.kd_per_delay=-1"])
+    assert "\n" not in str(e.value)
+
+
 def test_robot_joint_damping_builds_into_the_model_and_the_ground_truth():
     assert rb.build_mj_model(None, 0.5).dof_damping[6:].tolist() == [rb.JOINT_DAMPING] * 12
     two = rb.RobotConfig(joint_damping=2.0)

@@ -377,16 +377,29 @@ def test_cli_export_with_the_robots_kd_writes_it_and_the_trained_gains(policy_fi
     side0, side = (json.loads((tmp_path / f"{n}.onnx.json").read_text())
                    for n in ("plain", "damped"))
     kp, kd = side0["pd"]["kp"], side0["pd"]["kd"]
-    assert kd != 2.5 and side0["pd"]["trained"] == {"kp": kp, "kd": kd}
+    trained = {"kp": kp, "kd": kd, "kd_per_delay_s": 0.0}
+    assert kd != 2.5 and side0["pd"]["trained"] == trained
     assert side0["policy"]["pd_overrides"] == []
-    assert (side["pd"]["kp"], side["pd"]["kd"]) == (kp, 2.5)
-    assert side["pd"]["trained"] == {"kp": kp, "kd": kd}
+    assert (side["pd"]["kp"], side["pd"]["kd"], side["pd"]["kd_per_delay_s"]) == (kp, 2.5, 0.0)
+    assert side["pd"]["trained"] == trained
     assert side["policy"]["pd_overrides"] == ["robot.kd=2.5"]
     assert plain.read_bytes() == damped.read_bytes()
     from mjx_stairs.tools import contract
     c = contract.load_contract(damped)
     q, qd = np.zeros(12), np.full(12, 0.1)
     np.testing.assert_allclose(contract.pd_torque(c, q, q, qd), -0.25 * np.ones(12))
+    np.testing.assert_allclose(contract.pd_torque(c, q, q, qd, delay_s=0.02), -0.25)  # no rise
+    # the damping scheduled by the robot's measured delay: kd + kd_per_delay * delay
+    scheduled = tmp_path / "scheduled.onnx"
+    assert cli.main(["export", "--checkpoint", str(policy_file), "--onnx", str(scheduled),
+                     "--no-verify", "--pd", "kd_per_delay=75"]) == 0
+    side = json.loads((tmp_path / "scheduled.onnx.json").read_text())
+    assert (side["pd"]["kd"], side["pd"]["kd_per_delay_s"]) == (kd, 75.0)
+    assert side["pd"]["trained"] == trained and "kd_per_delay_s" in side["pd"]["law"]
+    c = contract.load_contract(scheduled)
+    for delay_s in (0.0, 0.02):
+        np.testing.assert_allclose(contract.pd_torque(c, q, q, qd, delay_s=delay_s),
+                                   -0.1 * (kd + 75.0 * delay_s), rtol=1e-12)
 
 
 @pytest.mark.parametrize("flag,item,why", [
@@ -398,6 +411,7 @@ def test_cli_export_with_the_robots_kd_writes_it_and_the_trained_gains(policy_fi
     ("--pd", "kd", "expected KEY=VALUE with KEY one of kd"),
     ("--pd", "kd=-1", "kd must be a finite number >= 0"),
     ("--pd", "kd=soft", "kd must be a finite number >= 0"),
+    ("--pd", "kd_per_delay=-75", "kd_per_delay must be a finite number >= 0"),
     ("--pd", "kd=nan", "kd must be a finite number >= 0"),
 ])
 def test_cli_export_refuses_a_setting_it_cannot_carry(policy_file, tmp_path, capsys, flag, item,

@@ -448,6 +448,24 @@ def test_latency_delays_the_pd_target(onnx_file, latency_ms, applied_in_first):
     np.testing.assert_allclose(sim.active, target)
 
 
+@pytest.mark.parametrize("latency_ms", [0.0, 10.0, 20.0])
+def test_the_pd_damping_follows_the_sidecars_schedule_at_the_robots_latency(onnx_file,
+                                                                            latency_ms):
+    """pd.kd_per_delay_s: the motors' damping is kd plus that times the latency the robot
+    runs with (20 ms at 75: 1.0 + 1.5); without it (older sidecars) kd alone."""
+    sim = _sim(onnx_file, latency_ms=latency_ms)
+    sim.c = dataclasses.replace(sim.c, kd_per_delay=75.0)
+    vj = sim.w.dof_adr
+    sim.w.data.qvel[vj] = 0.2
+    q = sim.w.data.qpos[sim.w.qpos_adr].copy()
+    sim.active = q  # no position error: the torque is the damping's alone
+    kd = sim.c.kd + 75.0 * latency_ms * 1e-3
+    np.testing.assert_allclose(sim.apply_pd(), -0.2 * kd * np.ones(12), rtol=1e-9)
+    np.testing.assert_allclose(ct.pd_torque(dataclasses.replace(sim.c, kd_per_delay=0.0), q, q,
+                                            np.full(12, 0.2), latency_ms * 1e-3),
+                               -0.2 * sim.c.kd * np.ones(12), rtol=1e-9)
+
+
 def test_noise_has_the_training_widths(onnx_file):
     sim = _sim(onnx_file, noise=True, seed=3)
     clean = ct.observation(sim.c, sim.measure())
