@@ -370,7 +370,8 @@ def _add_tools(sub) -> None:
                          "height_map.sensor_height")
     ex.add_argument("--pd", nargs="*", default=[], metavar="KEY=VALUE",
                     help="the robot's PD gains where they differ from training, listed in the "
-                         "sidecar: kd (adds to the joints' damping; docs/deploy.md)")
+                         "sidecar: kd (adds to the joints' damping), kd_per_delay (its rise "
+                         "per s of the robot's action delay; docs/deploy.md)")
     ex.set_defaults(fn=cmd_export)
     sim2sim_cli.add_parser(sub)
 
