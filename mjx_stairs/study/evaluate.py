@@ -128,6 +128,7 @@ def physics_settings(env: StairEnv | EnvConfig) -> dict[str, Any]:
             "joint_damping": robot.joint_damping, "implicit_damping": robot.implicit_damping,
             "head_collision": robot.head_collision, "calf_collision": robot.calf_collision,
             "action_delay_s": robot.action_delay_s,
+            "pd_kd": robot.delayed_kd,  # the PD's damping gain at that delay (kd_per_delay)
             "contact_timeconst": robot.contact_timeconst}
 
 

@@ -241,6 +241,9 @@ def test_the_pd_damping_rises_with_each_robots_delay_as_scheduled(env):
     assert fixed.delayed_kd == pytest.approx(2.5)
     bias = box_world.build_model(np.zeros((0, 6)), fixed).actuator_biasprm[:, 2]
     np.testing.assert_allclose(bias, -2.5)
+    from mjx_stairs.study.evaluate import physics_settings  # an evaluation's record says it
+    late = env_config_from(None, ["robot.kd_per_delay=75", "robot.action_delay_s=0.02"])
+    assert physics_settings(late)["pd_kd"] == pytest.approx(2.5)
     with pytest.raises(ConfigError, match="kd_per_delay") as e:
         env_config_from(None, ["robot.kd_per_delay=-1"])
     assert "\n" not in str(e.value)

@@ -455,8 +455,7 @@ def test_the_pd_damping_follows_the_sidecars_schedule_at_the_robots_latency(onnx
     runs with (20 ms at 75: 1.0 + 1.5); without it (older sidecars) kd alone."""
     sim = _sim(onnx_file, latency_ms=latency_ms)
     sim.c = dataclasses.replace(sim.c, kd_per_delay=75.0)
-    vj = sim.w.dof_adr
-    sim.w.data.qvel[vj] = 0.2
+    sim.w.data.qvel[sim.w.dof_adr] = 0.2
     q = sim.w.data.qpos[sim.w.qpos_adr].copy()
     sim.active = q  # no position error: the torque is the damping's alone
     kd = sim.c.kd + 75.0 * latency_ms * 1e-3
