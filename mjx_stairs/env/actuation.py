@@ -41,9 +41,9 @@ class Actuator:
         scales, kd raised by `robot.kd_per_delay` times its action delay (the gain scheduled by
         the latency, as the sidecar's PD law tells the robot program)."""
         r = self.config.robot
-        delay_s = r.timestep * info["delay_steps"] if "delay_steps" in info else 0.0
-        kd = (r.kd + r.kd_per_delay * delay_s) * info["kd_scale"]
-        return r.kp * info["kp_scale"], kd, self._torque_limit * info["motor_strength"]
+        kd = r.kd_at(r.timestep * info["delay_steps"]) if "delay_steps" in info else r.kd
+        return (r.kp * info["kp_scale"], kd * info["kd_scale"],
+                self._torque_limit * info["motor_strength"])
 
     def __call__(self, data0: mjx.Data, action: jnp.ndarray,
                  info: dict) -> tuple[mjx.Data, jnp.ndarray]:

@@ -112,10 +112,14 @@ class RobotConfig:
         """`action_delay_s` in whole physics steps."""
         return int(round(self.action_delay_s / self.timestep))
 
+    def kd_at(self, delay_s):
+        """The PD's damping at an action delay of `delay_s` s (kd_per_delay; arrays too)."""
+        return self.kd + self.kd_per_delay * delay_s
+
     @property
     def delayed_kd(self) -> float:
-        """The PD's damping at the fixed `action_delay_s` (kd_per_delay's schedule)."""
-        return self.kd + self.kd_per_delay * self.action_delay_steps * self.timestep
+        """`kd_at` the fixed `action_delay_s`, in whole physics steps."""
+        return self.kd_at(self.action_delay_steps * self.timestep)
 
     def __post_init__(self):
         if self.sunk_exit not in ("top", "nearest"):
@@ -209,9 +213,8 @@ class Robot:
     config: RobotConfig
 
 
-def build_mj_model(
-    heights: np.ndarray | None, resolution: float, config: RobotConfig = RobotConfig()
-) -> mujoco.MjModel:
+def build_mj_model(heights: np.ndarray | None, resolution: float,
+                   config: RobotConfig = RobotConfig()) -> mujoco.MjModel:
     """Compile the Go2 with a terrain heightfield.
 
     Args:
@@ -249,10 +252,8 @@ def build_mj_model(
                 geom.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID
                 geom.size = [geom.size[0]] * 3
     elif config.terrain_contacts != "mjx":
-        raise ValueError(
-            "robot.terrain_contacts must be 'mjx', 'nearest' or 'columns', got "
-            f"{config.terrain_contacts!r}"
-        )
+        raise ValueError("robot.terrain_contacts must be 'mjx', 'nearest' or 'columns', got "
+                         f"{config.terrain_contacts!r}")
     return spec.compile()
 
 

@@ -104,6 +104,7 @@ class Sim:
                  options: Options = Options()):
         self.c, self.policy, self.w, self.course, self.o = contract, policy, world, course, options
         self.delay = int(round(options.latency_ms * 1e-3 / world.model.opt.timestep))
+        self.delay_s = self.delay * world.model.opt.timestep  # as the robot measured it
         self.rng = np.random.default_rng(options.seed)
 
     def reset(self, x: float, y: float, yaw: float, z: float | None = None) -> None:
@@ -151,7 +152,7 @@ class Sim:
             target=ct.goal_target(c, pos[:2], self.course.goal, self.course.route),
             terrain_z=terrain_z, joint_pos_history=self.history.joint_pos,
             action_history=self.history.actions,
-            action_delay_s=self.delay * self.w.model.opt.timestep)  # as the robot measured it
+            action_delay_s=self.delay_s)
 
     def observe(self) -> np.ndarray:
         """The observation [D] (with the training noise when `options.noise`)."""
@@ -192,7 +193,7 @@ class Sim:
         """Set each joint's motor (by name) to the PD torque [12] of the target in effect."""
         d, w = self.w.data, self.w
         tau = ct.pd_torque(self.c, self.active, d.qpos[w.qpos_adr], d.qvel[w.dof_adr],
-                           delay_s=self.delay * w.model.opt.timestep)  # as the robot measured it
+                           self.delay_s)
         d.ctrl[w.actuator] = tau / w.gear
         return tau
 
