@@ -473,6 +473,9 @@ run_step() {
       [ ${#steps[@]} -gt 0 ] && args+=(--steps "$(IFS=,; echo "${steps[*]}")")
       [ -n "${CODE_POLICIES:-}" ] && args+=(--policies "${CODE_POLICIES//+/,}")
       [ -n "${CODE_MESH:-}" ] && args+=(--mesh-policies "${CODE_MESH//+/,}")
+      # CODE_ENV (a+b, as EVAL_ENV): the env overrides; CODE_SUITE_ARGS=--env=a+b split into
+      # --env=a b, and argparse refused b (2026-11-30, a GPU's half call lost)
+      [ -n "${CODE_ENV:-}" ] && args+=(--env ${CODE_ENV//+/ })
       [ "$(left)" -lt 90 ] && { echo "no time left for $step"; return; }
       timeout $(( $(left) - 15 )) python3 experiments/gpu/code_suite.py "$OUT/code_suite" \
         "${args[@]}" 2>&1 | grep -v warp
