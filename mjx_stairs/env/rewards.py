@@ -23,6 +23,8 @@ class Quantities(NamedTuple):
     centreline_distance: jnp.ndarray  # [] xy distance to the centre-line polyline (m)
     path_to_goal: jnp.ndarray  # [] D of the centre-line reward (m)
     lin_vel_body: jnp.ndarray  # [3] base linear velocity in the body frame
+    ang_vel_body: jnp.ndarray  # [3] base angular velocity in the body frame (rad/s)
+    gravity_body: jnp.ndarray  # [3] unit gravity in the body frame ([0, 0, -1] upright)
     planar_speed: jnp.ndarray  # [] xy speed of the base (m/s)
     torque: jnp.ndarray  # [12] last physics step's joint torques
     joint_pos: jnp.ndarray  # [12]
@@ -64,6 +66,11 @@ class RewardConfig:
     overspeed: float = -1.0  # planar speed above max_speed (m/s)
     backward: float = -0.05  # backward body-frame speed (m/s)
     feet_air_time: float = 0.2  # sum over touchdowns of (min(air, air_max) - air_min)
+    # The base's motion off its gait (legged_gym's and Isaac Lab's velocity tasks: -2.0, -0.05;
+    # the authors' stair env has neither): off here, the paper's reward as written.
+    lin_vel_z: float = 0.0  # body-frame vertical speed squared (m/s)^2
+    ang_vel_xy: float = 0.0  # roll and pitch rates squared, body frame (rad/s)^2
+    roll: float = 0.0  # lateral tilt: gravity's body-y component squared, sin^2(roll) upright
 
     coarse_std: float = 5.0
     fine_std: float = 1.0
@@ -179,6 +186,19 @@ def feet_air_time(q: Quantities, c: RewardConfig) -> jnp.ndarray:
     return jnp.sum(air * q.first_contact)
 
 
+def lin_vel_z(q: Quantities, c: RewardConfig) -> jnp.ndarray:
+    return jnp.square(q.lin_vel_body[2])
+
+
+def ang_vel_xy(q: Quantities, c: RewardConfig) -> jnp.ndarray:
+    return jnp.sum(jnp.square(q.ang_vel_body[:2]))
+
+
+def roll(q: Quantities, c: RewardConfig) -> jnp.ndarray:
+    """A stair's pitch is free: the body's sideways lean alone."""
+    return jnp.square(q.gravity_body[1])
+
+
 TERMS: dict[str, Callable[[Quantities, RewardConfig], jnp.ndarray]] = {
     f.__name__: f
     for f in (
@@ -200,6 +220,9 @@ TERMS: dict[str, Callable[[Quantities, RewardConfig], jnp.ndarray]] = {
         overspeed,
         backward,
         feet_air_time,
+        lin_vel_z,
+        ang_vel_xy,
+        roll,
     )
 }
 """All reward terms by name; each name is also a weight field of RewardConfig."""

@@ -271,6 +271,8 @@ class StairEnv(Env):
             centreline_distance=dc,
             path_to_goal=path,
             lin_vel_body=kin.lin_vel_body,
+            ang_vel_body=qvel[3:6],  # a free joint's angular velocity is in the body frame
+            gravity_body=kin.gravity_body,
             planar_speed=jnp.linalg.norm(qvel[:2]),
             torque=data.ctrl,  # the last substep's torques (before the step's, if it blew up)
             joint_pos=qpos[qj],

@@ -108,7 +108,8 @@ def test_goal_draw_needs_the_final_goal_mode():
         GoalDrawConfig(stationary_prob=1.5)
 
 
-SIZES = {"lin_vel_body": 3, "trunk_contacts": 4, "knee_contacts": 4, "shin_contacts": 4,
+SIZES = {"lin_vel_body": 3, "ang_vel_body": 3, "gravity_body": 3, "trunk_contacts": 4,
+         "knee_contacts": 4, "shin_contacts": 4,
          "first_contact": 4, "air_time": 4, "torque": 12, "joint_pos": 12, "joint_vel": 12,
          "joint_acc": 12, "action": 12, "last_action": 12, "joint_lower": 12, "joint_upper": 12}
 

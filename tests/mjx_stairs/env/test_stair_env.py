@@ -13,7 +13,7 @@ from mjx_stairs.env import curriculum as cur
 from mjx_stairs.env import observation
 from mjx_stairs.env import rewards as rw
 from mjx_stairs.env.config import EnvConfig
-from mjx_stairs.env.geometry import quat_to_mat
+from mjx_stairs.env.geometry import base_kinematics, quat_to_mat
 from mjx_stairs.env.stair_env import StairEnv
 from mjx_stairs.sim import robot as rb
 
@@ -197,6 +197,8 @@ def _quantities(**kw):
         centreline_distance=jnp.float32(0.0),
         path_to_goal=jnp.float32(3.0),
         lin_vel_body=jnp.zeros(3),
+        ang_vel_body=jnp.zeros(3),
+        gravity_body=jnp.array([0.0, 0.0, -1.0]),
         planar_speed=jnp.float32(0.0),
         torque=jnp.zeros(12),
         joint_pos=jnp.zeros(12),
@@ -260,6 +262,35 @@ def test_navigation_terms_increase_as_goal_nears():
     assert (
         rw.nav_fine(_quantities(goal_distance=jnp.float32(0.2), time=jnp.float32(1.0)), late) == 0.0
     )
+
+
+def test_base_motion_terms_read_the_bodys_rates_and_lean_not_the_stairs_pitch(env, fns):
+    """lin_vel_z, ang_vel_xy and roll: zero for a level robot at rest, the squares of what they
+    name otherwise, a pitch alone (a stair's) free of the roll term; off unless weighted. The
+    env feeds them the base's body-frame rates and gravity (robot 0 after a step, rolled 20 deg
+    and turning)."""
+    c = dataclasses.replace(rw.STAGE2, lin_vel_z=-2.0, ang_vel_xy=-0.05, roll=-1.0)
+    for term in (rw.lin_vel_z, rw.ang_vel_xy, rw.roll):
+        assert float(term(_quantities(), c)) == 0.0
+        assert term.__name__ not in rw.active_terms(rw.STAGE1) + rw.active_terms(rw.STAGE2)
+    moving = _quantities(lin_vel_body=jnp.array([0.5, 0.1, 0.3]),
+                         ang_vel_body=jnp.array([1.0, 2.0, 3.0]))
+    assert float(rw.lin_vel_z(moving, c)) == pytest.approx(0.09)
+    assert float(rw.ang_vel_xy(moving, c)) == pytest.approx(5.0)
+    pitch, lean = np.radians(35.0), np.radians(20.0)
+    pitched = _quantities(gravity_body=jnp.array([np.sin(pitch), 0.0, -np.cos(pitch)]))
+    assert float(rw.roll(pitched, c)) == pytest.approx(0.0, abs=1e-12)
+    _, terms = rw.compute(moving, c, 0.02)
+    assert float(terms["ang_vel_xy"]) == pytest.approx(-0.05 * 0.02 * 5.0)
+    state = fns["step"](_reset(env, fns, [0] * B), jnp.zeros((B, env.action_size)))
+    one = jax.tree.map(lambda x: x[0], state)
+    d = one.pipeline_state
+    quat = jnp.array([np.cos(lean / 2), np.sin(lean / 2), 0.0, 0.0])  # about the body's x
+    d = d.replace(qpos=d.qpos.at[3:7].set(quat),
+                  qvel=d.qvel.at[3:6].set(jnp.array([1.0, 2.0, 3.0])))
+    q, _, _ = env._quantities(d, base_kinematics(d.qpos, d.qvel), jnp.zeros(12), one.info)
+    np.testing.assert_allclose(np.asarray(q.ang_vel_body), [1.0, 2.0, 3.0])
+    assert float(rw.roll(q, c)) == pytest.approx(np.sin(lean) ** 2, rel=1e-5)
 
 
 # ----------------------------------------------------------------------------- curriculum
