@@ -1,0 +1,116 @@
+"""The falls that keep the up cells under 99 %: when they happen, and how the robots set off
+(issue 24; docs/results.md 8ah).
+
+`records`: over sim2sim's per-episode records (experiments/gpu/sim2sim_table.py writes them to
+OUT/cells/*.json), the falls within the first `--within` seconds against the later ones, by
+level. `mjx`: the evaluation's robots (`mjx-stairs eval`'s starts at `--seed`) of one family and
+level stepped in the evaluation env, and the given ones' roll, pitch (deg, from the body-frame
+gravity), base height and largest |action| printed every policy step.
+
+    PYTHONPATH=. python experiments/first_second.py records \\
+        'experiments/results/sim2sim/mix_wall_rule_export/mix_*/cells/*.json' --exclude _d20 code
+    PYTHONPATH=. JAX_PLATFORMS=cpu python experiments/first_second.py mjx \\
+        --checkpoint experiments/results/generalist_from_stage1_mix_told_log/policy.npz \\
+        --family u_shaped --level 1 --robots 1000 --show 87,229,235,420,535 \\
+        --env height_map.occlusion_samples=32
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import glob
+import json
+
+import numpy as np
+
+
+def early_falls(pattern: str, within_s: float, exclude: tuple[str, ...] = ()) -> dict:
+    """{"episodes", "early", "late", "early_by_level"} over the records of the latency-free
+    cells matching `pattern` whose path holds none of `exclude`."""
+    n, early, late = 0, 0, 0
+    by_level: collections.Counter = collections.Counter()
+    for path in sorted(glob.glob(pattern)):
+        if any(x in path for x in exclude):
+            continue
+        cell = json.load(open(path))
+        if cell.get("latency_ms", 0) or "records" not in cell:
+            continue
+        for r in cell["records"]:
+            n += 1
+            if not r["fell"]:
+                continue
+            if r["time_s"] < within_s:
+                early += 1
+                by_level[cell["cell"].rsplit("_", 1)[-1]] += 1
+            else:
+                late += 1
+    return {"episodes": n, "early": early, "late": late,
+            "early_by_level": dict(sorted(by_level.items()))}
+
+
+def roll_pitch_deg(gravity_body: np.ndarray) -> tuple[float, float]:
+    """(roll, pitch) in degrees from unit gravity in the body frame ([0, 0, -1] upright)."""
+    g = np.clip(gravity_body, -1.0, 1.0)
+    return float(np.degrees(np.arcsin(-g[1]))), float(np.degrees(np.arcsin(g[0])))
+
+
+def trace_mjx(args) -> None:
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_stairs.env.geometry import base_kinematics
+    from mjx_stairs.rl.policy import load_policy, policy_action
+    from mjx_stairs.study.evaluate import level_states, make_eval_env
+    from mjx_stairs.study.specs import EvalSpec
+
+    show = jnp.asarray([int(v) for v in args.show.split(",")])
+    policy = load_policy(args.checkpoint)
+    spec = EvalSpec(family=args.family, schedule="test", direction=args.direction,
+                    levels=(args.level - 1,), robots_per_level=args.robots, seed=args.seed,
+                    env_overrides=tuple(args.env))
+    env, _ = make_eval_env(policy, spec)
+    state = jax.tree.map(lambda x: x[show], level_states(env, 1, spec))
+    act = jax.jit(lambda s: policy_action(policy, s.obs["state"]))
+    step = jax.jit(lambda s, a: jax.vmap(env.step)(s, a))
+    gravity = jax.jit(jax.vmap(lambda q, v: base_kinematics(q, v).gravity_body))
+    for k in range(args.steps):
+        a = act(state)
+        state = step(state, a)
+        g = np.asarray(gravity(state.pipeline_state.qpos, state.pipeline_state.qvel))
+        z, done = np.asarray(state.pipeline_state.qpos[:, 2]), np.asarray(state.done) > 0
+        amax = np.abs(np.asarray(a)).max(axis=1)
+        cols = []
+        for i in range(len(show)):
+            r, p = roll_pitch_deg(g[i])
+            end = " ended" if done[i] else ""
+            cols.append(f"{r:+4.0f}/{p:+4.0f} z{z[i]:.2f} a{amax[i]:.1f}{end}")
+        print(f"t {(k + 1) * env.dt:.2f}  " + " | ".join(cols))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="what", required=True)
+    r = sub.add_parser("records")
+    r.add_argument("pattern", help="glob of sim2sim cell JSONs")
+    r.add_argument("--within", type=float, default=1.0, help="seconds")
+    r.add_argument("--exclude", nargs="*", default=[], help="skip paths holding these")
+    m = sub.add_parser("mjx")
+    m.add_argument("--checkpoint", required=True)
+    m.add_argument("--family", default="u_shaped")
+    m.add_argument("--direction", default="up", choices=("up", "down"))
+    m.add_argument("--level", type=int, default=1)
+    m.add_argument("--robots", type=int, default=1000, help="as the evaluation: its starts")
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--show", required=True, help="robot indices, comma separated")
+    m.add_argument("--steps", type=int, default=25)
+    m.add_argument("--env", nargs="*", default=[])
+    a = ap.parse_args()
+    if a.what == "records":
+        print(json.dumps(early_falls(a.pattern, a.within, tuple(a.exclude)), indent=1))
+    else:
+        trace_mjx(a)
+
+
+if __name__ == "__main__":
+    main()
