@@ -89,12 +89,13 @@ def make_eval_env(policy: Policy, spec: EvalSpec) -> tuple[StairEnv, Any]:
 
 
 def first_episodes(env: StairEnv, policy: Policy, state) -> tuple[jax.Array, ...]:
-    """(finished, succeeded, fell, goal_step) [B] of each robot's first episode from `state`,
-    the policy's mean action, over `env.episode_steps` steps (traceable: jit it). goal_step:
-    the step (1-based) at which the success condition had held long enough, -1 if never."""
+    """(finished, succeeded, fell, goal_step, end_step) [B] of each robot's first episode from
+    `state`, the policy's mean action, over `env.episode_steps` steps (traceable: jit it).
+    goal_step: the step (1-based) at which the success condition had held long enough, -1 if
+    never; end_step: the step (1-based) that ended the first episode, -1 if none did."""
 
     def body(carry, k):
-        st, finished, succeeded, fell, goal_step = carry
+        st, finished, succeeded, fell, goal_step, end_step = carry
         st = jax.vmap(env.step)(st, policy_action(policy, st.obs["state"]))
         done = st.done > 0
         first = done & ~finished
@@ -103,12 +104,20 @@ def first_episodes(env: StairEnv, policy: Policy, state) -> tuple[jax.Array, ...
         goal_step = jnp.where(~finished & now & (goal_step < 0), k + 1, goal_step)
         succeeded = succeeded | (first & (st.metrics["episode_success"] > 0))
         fell = fell | (first & (st.metrics["terminated"] > 0))
-        return (st, finished | done, succeeded, fell, goal_step), None
+        end_step = jnp.where(first, k + 1, end_step)
+        return (st, finished | done, succeeded, fell, goal_step, end_step), None
 
     zeros = jnp.zeros(state.done.shape, bool)
     never = jnp.full(state.done.shape, -1, jnp.int32)
     steps = jnp.arange(env.episode_steps, dtype=jnp.int32)
-    return jax.lax.scan(body, (state, zeros, zeros, zeros, never), steps)[0][1:]
+    return jax.lax.scan(body, (state, zeros, zeros, zeros, never, never), steps)[0][1:]
+
+
+def fell_within(fell: np.ndarray, end_step: np.ndarray, steps: int, n_levels: int) -> list[float]:
+    """Per level (robots row-major by level), the share of robots whose first episode ended in
+    a fall by policy step `steps`: the falls of the first second with steps = 1 s / dt."""
+    early = fell & (end_step > 0) & (end_step <= steps)
+    return [float(v) for v in early.reshape(n_levels, -1).mean(1)]
 
 
 def _check_finished(finished: np.ndarray) -> None:
@@ -150,7 +159,7 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
     n_levels = len(levels)
     state = level_states(env, n_levels, spec)
     t0 = time.time()
-    finished, succeeded, fell, _ = jax.device_get(
+    finished, succeeded, fell, _, end_step = jax.device_get(
         jax.jit(lambda s: first_episodes(env, policy, s))(state))
     wall = time.time() - t0
     _check_finished(finished)
@@ -163,6 +172,8 @@ def success_by_level(policy: Policy, spec: EvalSpec) -> dict[str, Any]:
         "levels": [lv + 1 for lv in levels],
         "success": [float(s) for s in succ],
         "fell": [float(f) for f in fall],
+        # falls in the first second: the gait setting off, not the stairs (docs/results.md 8ah)
+        "fell_first_second": fell_within(fell, end_step, round(1.0 / env.dt), n_levels),
         "robots_per_level": spec.robots_per_level,
         "episode_length_s": spec.episode_length_s,
         "seed": spec.seed,
@@ -271,7 +282,7 @@ def run_policies(policies: dict[str, Policy], env: StairEnv, state):
             fn = jax.jit(functools.partial(run, like=p))
             compiled[key] = fn.lower(state, p.params, p.normalizer).compile()
         t0 = time.time()
-        finished, succeeded, fell, goal_step = jax.device_get(
+        finished, succeeded, fell, goal_step, _ = jax.device_get(
             compiled[key](state, p.params, p.normalizer))
         _check_finished(finished)
         yield name, finished, succeeded, fell, goal_step, time.time() - t0

@@ -62,6 +62,7 @@ def test_eval_and_exp1_report(trained, tmp_path):
     r = results[0]
     assert r["levels"] == [1, 6] and len(r["success"]) == 2
     assert all(0.0 <= s <= 1.0 for s in r["success"] + r["fell"])
+    assert all(0.0 <= e <= f for e, f in zip(r["fell_first_second"], r["fell"], strict=True))
     saved = json.loads((tmp_path / "eval" / "results.json").read_text())
     assert saved[0]["success"] == r["success"]
     assert "| u_shaped |" in (tmp_path / "eval" / "results.md").read_text()
@@ -71,6 +72,16 @@ def test_eval_and_exp1_report(trained, tmp_path):
     assert (tmp_path / "exp1" / "fig4_critic_u.png").stat().st_size > 5000
     assert "paper (Table 1)" in (tmp_path / "exp1" / "exp1.md").read_text()
     assert set(summary["results"]) == {"stage 2 (stall penalty)"}
+
+
+def test_falls_in_the_first_second_counted_by_the_step_that_ended_the_episode():
+    """fell_within: a robot counts when its first episode ended in a fall by the step given;
+    a later fall, a success or a timeout (end step -1) does not; shares per level row."""
+    fell = np.array([True, True, False, True, False, True, True, False])
+    end = np.array([3, 50, 2, 51, -1, 50, 1, -1])
+    assert evaluate.fell_within(fell, end, 50, 2) == [0.5, 0.5]
+    assert evaluate.fell_within(fell, end, 10, 2) == [0.25, 0.25]
+    assert evaluate.fell_within(fell, end, 0, 2) == [0.0, 0.0]
 
 
 def test_eval_env_overrides_change_the_physics_not_the_policy(trained):
