@@ -74,7 +74,8 @@ def _python_call(tmp_path, step: str, variables: dict, marker: str) -> str:
 ])
 def test_code_suite_step_runs_every_step_asked_for(tmp_path, variables, expected):
     """code-suite passes one --steps for both CODE_POLICIES and CODE_MESH (two --steps flags
-    ran the last one only, 2026-11-27), and CODE_ENV's overrides as one --env. python3 is a stand-in that records its arguments."""
+    ran the last one only, 2026-11-27), and CODE_ENV's overrides as one --env. python3 is a
+    stand-in that records its arguments."""
     call = _python_call(tmp_path, "code-suite", variables, "code_suite.py")
     assert call.endswith(expected), call
 
