@@ -40,7 +40,7 @@ def early_falls(pattern: str, within_s: float, exclude: tuple[str, ...] = ()) ->
             n += 1
             if not r["fell"]:
                 continue
-            if r["time_s"] < within_s:
+            if r["time_s"] <= within_s:
                 early += 1
                 by_level[cell["cell"].rsplit("_", 1)[-1]] += 1
             else:
