@@ -1,14 +1,16 @@
 """The falls that keep the up cells under 99 %: when they happen, and how the robots set off
 (issue 24; docs/results.md 8ah).
 
-`records`: over sim2sim's per-episode records (experiments/gpu/sim2sim_table.py writes them to
-OUT/cells/*.json), the falls within the first `--within` seconds against the later ones, by
-level. `mjx`: the evaluation's robots (`mjx-stairs eval`'s starts at `--seed`) of one family and
-level stepped in the evaluation env, and the given ones' roll, pitch (deg, from the body-frame
-gravity), base height and largest |action| printed every policy step.
+`records`: over a policy's sim2sim per-episode records (experiments/gpu/sim2sim_table.py
+writes them to OUT/cells/*.json) on the paper's cells without latency, the falls within the
+first `--within` seconds against the later ones, by level. `mjx`: the evaluation's robots
+(`mjx-stairs eval`'s starts at `--seed`) of one family and level stepped in the evaluation env,
+and the given ones' roll, pitch (deg, from the body-frame gravity), base height and largest
+|action| printed every policy step.
 
     PYTHONPATH=. python experiments/first_second.py records \\
-        'experiments/results/sim2sim/mix_wall_rule_export/mix_*/cells/*.json' --exclude _d20 code
+        experiments/results/sim2sim/mix_wall_rule_export --robot-sha aa80ba1f \\
+        --policy experiments/results/generalist_from_stage1_mix/policy.npz
     PYTHONPATH=. JAX_PLATFORMS=cpu python experiments/first_second.py mjx \\
         --checkpoint experiments/results/generalist_from_stage1_mix_told_log/policy.npz \\
         --family u_shaped --level 1 --robots 1000 --show 87,229,235,420,535 \\
@@ -19,31 +21,30 @@ from __future__ import annotations
 
 import argparse
 import collections
-import glob
 import json
 
 import numpy as np
 
 
-def early_falls(pattern: str, within_s: float, exclude: tuple[str, ...] = ()) -> dict:
-    """{"episodes", "early", "late", "early_by_level"} over the records of the latency-free
-    cells matching `pattern` whose path holds none of `exclude`."""
+def early_falls(root: str, policy: str, robot_sha: str | None, within_s: float,
+                contact_timeconst: float = 0.01) -> dict:
+    """{"episodes", "early", "late", "early_by_level"} over the latency-free paper cells of
+    `policy` under `root`, selected as `mjx-stairs sim2sim-gaps` selects them
+    (sim2sim_gaps.gather: one setting, one robot file, the longer run of a cell run twice)."""
+    from mjx_stairs.tools import sim2sim_gaps
+
     n, early, late = 0, 0, 0
     by_level: collections.Counter = collections.Counter()
-    for path in sorted(glob.glob(pattern)):
-        if any(x in path for x in exclude):
+    for cell in sim2sim_gaps.gather(policy, root, [], robot_sha=robot_sha,
+                                    contact_timeconst=contact_timeconst):
+        if cell.mujoco is None or cell.key[2] == 0:  # not run, or a `code` case
             continue
-        cell = json.load(open(path))
-        if cell.get("latency_ms", 0) or "records" not in cell:
-            continue
-        for r in cell["records"]:
+        for r in cell.mujoco["records"]:
             n += 1
-            if not r["fell"]:
-                continue
-            if r["time_s"] <= within_s:
+            if r["fell"] and r["time_s"] <= within_s:
                 early += 1
-                by_level[cell["cell"].rsplit("_", 1)[-1]] += 1
-            else:
+                by_level[f"L{cell.key[2]}"] += 1
+            elif r["fell"]:
                 late += 1
     return {"episodes": n, "early": early, "late": late,
             "early_by_level": dict(sorted(by_level.items()))}
@@ -92,9 +93,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="what", required=True)
     r = sub.add_parser("records")
-    r.add_argument("pattern", help="glob of sim2sim cell JSONs")
+    r.add_argument("root", help="a folder of sim2sim_table.py runs (OUT/cells/*.json)")
+    r.add_argument("--policy", required=True, help="the policy.npz the cells name")
+    r.add_argument("--robot-sha", default=None, help="only cells run on this robot file")
     r.add_argument("--within", type=float, default=1.0, help="seconds")
-    r.add_argument("--exclude", nargs="*", default=[], help="skip paths holding these")
     m = sub.add_parser("mjx")
     m.add_argument("--checkpoint", required=True)
     m.add_argument("--family", default="u_shaped")
@@ -107,7 +109,7 @@ def main() -> None:
     m.add_argument("--env", nargs="*", default=[])
     a = ap.parse_args()
     if a.what == "records":
-        print(json.dumps(early_falls(a.pattern, a.within, tuple(a.exclude)), indent=1))
+        print(json.dumps(early_falls(a.root, a.policy, a.robot_sha, a.within), indent=1))
     else:
         trace_mjx(a)
 
