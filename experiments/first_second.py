@@ -15,6 +15,15 @@ and the given ones' roll, pitch (deg, from the body-frame gravity), base height 
         --checkpoint experiments/results/generalist_from_stage1_mix_told_log/policy.npz \\
         --family u_shaped --level 1 --robots 1000 --show 87,229,235,420,535 \\
         --env height_map.occlusion_samples=32
+    PYTHONPATH=. JAX_PLATFORMS=cpu python experiments/first_second.py starts \\
+        --checkpoint experiments/results/generalist_from_stage1_mix_told_log/policy.npz \\
+        --family u_shaped --level 1 --robots 4000 --seed 7 \\
+        --env height_map.occlusion_samples=32 spawn_height=0.33
+
+`starts`: of `--robots` evaluation starts at `--seed`, how many end within `--steps` policy steps
+(the start's falls), by the spawn heading's offset from the tile's, with each bin's mean largest
+|roll| before the end: whether the falls depend on the heading, the place or, with
+`spawn_height=...`, on how far the robot drops onto the floor at reset.
 """
 
 from __future__ import annotations
@@ -89,6 +98,45 @@ def trace_mjx(args) -> None:
         print(f"t {(k + 1) * env.dt:.2f}  " + " | ".join(cols))
 
 
+def start_falls(args) -> None:
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_stairs.env.geometry import base_kinematics
+    from mjx_stairs.rl.policy import load_policy, policy_action
+    from mjx_stairs.study.evaluate import level_states, make_eval_env
+    from mjx_stairs.study.specs import EvalSpec
+
+    policy = load_policy(args.checkpoint)
+    spec = EvalSpec(family=args.family, schedule="test", direction=args.direction,
+                    levels=(args.level - 1,), robots_per_level=args.robots, seed=args.seed,
+                    env_overrides=tuple(args.env))
+    env, _ = make_eval_env(policy, spec)
+    state = level_states(env, 1, spec)
+    kin = jax.vmap(base_kinematics)
+
+    def body(carry, _):
+        s, ended, worst = carry
+        s = jax.vmap(env.step)(s, policy_action(policy, s.obs["state"]))
+        g = kin(s.pipeline_state.qpos, s.pipeline_state.qvel).gravity_body
+        roll = jnp.degrees(jnp.arcsin(jnp.clip(-g[:, 1], -1.0, 1.0)))
+        worst = jnp.where(~ended & (jnp.abs(roll) > jnp.abs(worst)), roll, worst)
+        return (s, ended | (s.done > 0), worst), None
+
+    start = (state, jnp.zeros(state.done.shape, bool), jnp.zeros(state.done.shape))
+    _, ended, worst = jax.device_get(
+        jax.jit(lambda c: jax.lax.scan(body, c, None, args.steps)[0])(start))
+    yaw0 = np.asarray(kin(state.pipeline_state.qpos, state.pipeline_state.qvel).yaw)
+    tile_yaw = np.asarray(env.tiles.spawn[state.info["tile"]])[:, 5]
+    off = np.degrees((yaw0 - tile_yaw + np.pi) % (2 * np.pi) - np.pi)
+    print(f"{args.family} {args.direction} L{args.level} {args.env}: {int(ended.sum())} of "
+          f"{ended.size} ended within {args.steps * env.dt:.2f} s")
+    for lo in range(-45, 45, 15):
+        k = (off >= lo) & (off < lo + 15)
+        print(f"  heading {lo:+d} to {lo + 15:+d} deg: {int(ended[k].sum())} of {int(k.sum())}, "
+              f"mean largest roll {worst[k].mean():+.1f} deg")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="what", required=True)
@@ -98,20 +146,25 @@ def main() -> None:
     r.add_argument("--robot-sha", default=None, help="only cells run on this robot file")
     r.add_argument("--within", type=float, default=1.0, help="seconds")
     m = sub.add_parser("mjx")
-    m.add_argument("--checkpoint", required=True)
-    m.add_argument("--family", default="u_shaped")
-    m.add_argument("--direction", default="up", choices=("up", "down"))
-    m.add_argument("--level", type=int, default=1)
-    m.add_argument("--robots", type=int, default=1000, help="as the evaluation: its starts")
-    m.add_argument("--seed", type=int, default=0)
+    st = sub.add_parser("starts")
+    for p in (m, st):
+        p.add_argument("--checkpoint", required=True)
+        p.add_argument("--family", default="u_shaped")
+        p.add_argument("--direction", default="up", choices=("up", "down"))
+        p.add_argument("--level", type=int, default=1)
+        p.add_argument("--robots", type=int, default=1000, help="as the evaluation: its starts")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--env", nargs="*", default=[])
     m.add_argument("--show", required=True, help="robot indices, comma separated")
     m.add_argument("--steps", type=int, default=25)
-    m.add_argument("--env", nargs="*", default=[])
+    st.add_argument("--steps", type=int, default=50, help="policy steps (50: 1 s)")
     a = ap.parse_args()
     if a.what == "records":
         print(json.dumps(early_falls(a.root, a.policy, a.robot_sha, a.within), indent=1))
-    else:
+    elif a.what == "mjx":
         trace_mjx(a)
+    else:
+        start_falls(a)
 
 
 if __name__ == "__main__":
