@@ -65,22 +65,31 @@ def roll_pitch_deg(gravity_body: np.ndarray) -> tuple[float, float]:
     return float(np.degrees(np.arcsin(-g[1]))), float(np.degrees(np.arcsin(g[0])))
 
 
-def trace_mjx(args) -> None:
-    import jax
-    import jax.numpy as jnp
-
-    from mjx_stairs.env.geometry import base_kinematics
-    from mjx_stairs.rl.policy import load_policy, policy_action
+def eval_starts(args):
+    """(policy, evaluation env, its robots reset as `mjx-stairs eval` resets them) for one
+    family, direction and level at `args.seed`, with `args.env` overrides."""
+    from mjx_stairs.rl.policy import load_policy
     from mjx_stairs.study.evaluate import level_states, make_eval_env
     from mjx_stairs.study.specs import EvalSpec
 
-    show = jnp.asarray([int(v) for v in args.show.split(",")])
     policy = load_policy(args.checkpoint)
     spec = EvalSpec(family=args.family, schedule="test", direction=args.direction,
                     levels=(args.level - 1,), robots_per_level=args.robots, seed=args.seed,
                     env_overrides=tuple(args.env))
     env, _ = make_eval_env(policy, spec)
-    state = jax.tree.map(lambda x: x[show], level_states(env, 1, spec))
+    return policy, env, level_states(env, 1, spec)
+
+
+def trace_mjx(args) -> None:
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_stairs.env.geometry import base_kinematics
+    from mjx_stairs.rl.policy import policy_action
+
+    show = jnp.asarray([int(v) for v in args.show.split(",")])
+    policy, env, state = eval_starts(args)
+    state = jax.tree.map(lambda x: x[show], state)
     act = jax.jit(lambda s: policy_action(policy, s.obs["state"]))
     step = jax.jit(lambda s, a: jax.vmap(env.step)(s, a))
     gravity = jax.jit(jax.vmap(lambda q, v: base_kinematics(q, v).gravity_body))
@@ -103,16 +112,9 @@ def start_falls(args) -> None:
     import jax.numpy as jnp
 
     from mjx_stairs.env.geometry import base_kinematics
-    from mjx_stairs.rl.policy import load_policy, policy_action
-    from mjx_stairs.study.evaluate import level_states, make_eval_env
-    from mjx_stairs.study.specs import EvalSpec
+    from mjx_stairs.rl.policy import policy_action
 
-    policy = load_policy(args.checkpoint)
-    spec = EvalSpec(family=args.family, schedule="test", direction=args.direction,
-                    levels=(args.level - 1,), robots_per_level=args.robots, seed=args.seed,
-                    env_overrides=tuple(args.env))
-    env, _ = make_eval_env(policy, spec)
-    state = level_states(env, 1, spec)
+    policy, env, state = eval_starts(args)
     kin = jax.vmap(base_kinematics)
 
     def body(carry, _):
