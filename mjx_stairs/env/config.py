@@ -100,9 +100,12 @@ class RandomizationConfig:
     # s, uniform per robot in whole physics steps: a new PD target takes effect this much
     # later (the previous one holds until then); at most one policy step
     action_delay_s: tuple[float, float] = (0.0, 0.0)
+    # m, uniform per robot: the base's release height above the spawn floor at reset (() : the
+    # env's spawn_height, which evaluation keeps; the nominal pose's feet touch at ~0.32)
+    spawn_height: tuple[float, ...] = ()
 
     def __post_init__(self):
-        d, lag = self.joint_damping, self.action_delay_s
+        d, lag, h = self.joint_damping, self.action_delay_s, self.spawn_height
         _require("env.randomization", [
             ("joint_damping", list(d), not d or (len(d) == 2 and 0.0 <= d[0] <= d[1]),
              "() or [lo, hi] with 0 <= lo <= hi"),
@@ -110,7 +113,9 @@ class RandomizationConfig:
              self.joint_damping_draw in ("uniform", "log"), "'uniform' or 'log'"),
             ("joint_damping", list(d), self.joint_damping_draw == "uniform" or not d or d[0] > 0,
              "lo > 0 for joint_damping_draw = 'log'"),
-            ("action_delay_s", list(lag), 0.0 <= lag[0] <= lag[1], "[lo, hi], 0 <= lo <= hi")])
+            ("action_delay_s", list(lag), 0.0 <= lag[0] <= lag[1], "[lo, hi], 0 <= lo <= hi"),
+            ("spawn_height", list(h), not h or (len(h) == 2 and 0.0 < h[0] <= h[1]),
+             "() or [lo, hi] with 0 < lo <= hi")])
 
 
 @dataclasses.dataclass(frozen=True)

@@ -54,6 +54,15 @@ def draw(keys: jax.Array, config: EnvConfig) -> dict[str, jnp.ndarray]:
     return out
 
 
+def release_height(key: jax.Array, config: EnvConfig) -> jnp.ndarray:
+    """The base's height above the spawn floor at reset (m): drawn from
+    `randomization.spawn_height` when it is set and randomisation is on, else `spawn_height`."""
+    r = config.randomization
+    if r.enabled and r.spawn_height:
+        return jax.random.uniform(key, (), minval=r.spawn_height[0], maxval=r.spawn_height[1])
+    return jnp.asarray(config.spawn_height, jnp.float32)
+
+
 def robot_model(mx: mjx.Model, ids: rb.RobotIds, info: dict,
                 config: RandomizationConfig) -> mjx.Model:
     """The MJX model with this robot's randomised friction, trunk mass and CoM (and the joints'

@@ -199,7 +199,8 @@ class StairEnv(Env):
         joints = self._nominal + jax.random.uniform(
             ks[3], (12,), minval=-c.joint_noise_at_reset, maxval=c.joint_noise_at_reset
         )
-        qpos = jnp.concatenate([jnp.array([x, y, sp[2] + c.spawn_height]), yaw_quat(yaw), joints])
+        z = sp[2] + dr.release_height(jax.random.fold_in(ks[3], 1), c)
+        qpos = jnp.concatenate([jnp.stack([x, y, z]), yaw_quat(yaw), joints])
         draws = {**dr.draw(ks[4:], c), **perception.draw(rng, c)}
         draws.update(goals.draw(rng, self.tiles, tile, jnp.stack([x, y]), yaw, c))
         return qpos, {**draws, **routes.draw(rng, self.tiles, tile, c)}

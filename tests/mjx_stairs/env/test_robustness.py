@@ -187,6 +187,35 @@ def test_a_log_draw_puts_half_the_robots_under_the_geometric_mean_of_the_damping
         assert "\n" not in str(e.value)
 
 
+def test_the_release_height_is_drawn_in_training_and_the_envs_own_in_evaluation(env):
+    """randomization.spawn_height = [lo, hi]: each robot's reset puts its base lo-hi above its
+    tile's spawn floor, drawn per robot; with randomisation off (evaluation) and by default the
+    env's spawn_height (0.36); [hi, lo]: a one-line error naming the key."""
+    import copy
+    import dataclasses
+
+    from mjx_stairs.env.config import ConfigError, evaluation_config
+
+    cfg = env_config_from(None, ["randomization.spawn_height=[0.32, 0.42]"])
+    keys = jax.random.split(jax.random.PRNGKey(6), 500)
+    h = np.asarray(jax.vmap(lambda k: dr.release_height(k, cfg))(keys))
+    assert h.min() >= 0.32 and h.max() <= 0.42 and h.std() > 0.02
+    for fixed in (evaluation_config(cfg), env_config_from(None, [])):
+        assert float(dr.release_height(keys[0], fixed)) == pytest.approx(0.36)
+    drawn = copy.copy(env)
+    drawn.config = dataclasses.replace(env.config, randomization=dataclasses.replace(
+        env.config.randomization, spawn_height=(0.32, 0.42)))
+    for e, lo, hi in ((env, 0.36, 0.36), (drawn, 0.32, 0.42)):
+        s = jax.jit(jax.vmap(e.reset_at))(jax.random.split(jax.random.PRNGKey(7), B),
+                                          jnp.zeros(B, jnp.int32), jnp.zeros(B, jnp.int32))
+        z = np.asarray(s.pipeline_state.qpos[:, 2] - e.tiles.spawn[s.info["tile"], 2])
+        assert z.min() >= lo - 1e-5 and z.max() <= hi + 1e-5, (lo, hi, z)
+        assert (z.std() > 0.01) == (hi > lo)
+    with pytest.raises(ConfigError, match="randomization.spawn_height'") as e:
+        env_config_from(None, ["randomization.spawn_height=[0.42, 0.32]"])
+    assert "\n" not in str(e.value)
+
+
 def test_damping_is_the_robots_own_and_slows_its_joints(env, rollout, actuate):
     data, info = _standing(env, rollout, qvel_joints=4.0)
     vj = env.robot.ids.qvel_joints
