@@ -205,10 +205,11 @@ def test_the_release_height_is_drawn_in_training_and_the_envs_own_in_evaluation(
     drawn = copy.copy(env)
     drawn.config = dataclasses.replace(env.config, randomization=dataclasses.replace(
         env.config.randomization, spawn_height=(0.32, 0.42)))
-    for e, lo, hi in ((env, 0.36, 0.36), (drawn, 0.32, 0.42)):
-        s = jax.jit(jax.vmap(e.reset_at))(jax.random.split(jax.random.PRNGKey(7), B),
-                                          jnp.zeros(B, jnp.int32), jnp.zeros(B, jnp.int32))
-        z = np.asarray(s.pipeline_state.qpos[:, 2] - e.tiles.spawn[s.info["tile"], 2])
+    for released, lo, hi in ((env, 0.36, 0.36), (drawn, 0.32, 0.42)):
+        s = jax.jit(jax.vmap(released.reset_at))(
+            jax.random.split(jax.random.PRNGKey(7), B), jnp.zeros(B, jnp.int32),
+            jnp.zeros(B, jnp.int32))
+        z = np.asarray(s.pipeline_state.qpos[:, 2] - released.tiles.spawn[s.info["tile"], 2])
         assert z.min() >= lo - 1e-5 and z.max() <= hi + 1e-5, (lo, hi, z)
         assert (z.std() > 0.01) == (hi > lo)
     with pytest.raises(ConfigError, match="randomization.spawn_height'") as e:
