@@ -59,10 +59,11 @@ def early_falls(root: str, policy: str, robot_sha: str | None, within_s: float,
             "early_by_level": dict(sorted(by_level.items()))}
 
 
-def roll_pitch_deg(gravity_body: np.ndarray) -> tuple[float, float]:
-    """(roll, pitch) in degrees from unit gravity in the body frame ([0, 0, -1] upright)."""
+def roll_pitch_deg(gravity_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(roll, pitch) in degrees from unit gravity in the body frame ([..., 3]; [0, 0, -1]
+    upright)."""
     g = np.clip(gravity_body, -1.0, 1.0)
-    return float(np.degrees(np.arcsin(-g[1]))), float(np.degrees(np.arcsin(g[0])))
+    return np.degrees(np.arcsin(-g[..., 1])), np.degrees(np.arcsin(g[..., 0]))
 
 
 def eval_starts(args):
@@ -117,17 +118,18 @@ def start_falls(args) -> None:
     policy, env, state = eval_starts(args)
     kin = jax.vmap(base_kinematics)
 
-    def body(carry, _):
+    def body(carry, _):  # worst: the body-frame gravity of the largest sideways lean so far
         s, ended, worst = carry
         s = jax.vmap(env.step)(s, policy_action(policy, s.obs["state"]))
         g = kin(s.pipeline_state.qpos, s.pipeline_state.qvel).gravity_body
-        roll = jnp.degrees(jnp.arcsin(jnp.clip(-g[:, 1], -1.0, 1.0)))
-        worst = jnp.where(~ended & (jnp.abs(roll) > jnp.abs(worst)), roll, worst)
-        return (s, ended | (s.done > 0), worst), None
+        more = ~ended & (jnp.abs(g[:, 1]) > jnp.abs(worst[:, 1]))
+        return (s, ended | (s.done > 0), jnp.where(more[:, None], g, worst)), None
 
-    start = (state, jnp.zeros(state.done.shape, bool), jnp.zeros(state.done.shape))
-    _, ended, worst = jax.device_get(
+    upright = jnp.zeros(state.done.shape + (3,)).at[:, 2].set(-1.0)
+    start = (state, jnp.zeros(state.done.shape, bool), upright)
+    _, ended, worst_g = jax.device_get(
         jax.jit(lambda c: jax.lax.scan(body, c, None, args.steps)[0])(start))
+    worst, _ = roll_pitch_deg(worst_g)
     yaw0 = np.asarray(kin(state.pipeline_state.qpos, state.pipeline_state.qvel).yaw)
     tile_yaw = np.asarray(env.tiles.spawn[state.info["tile"]])[:, 5]
     off = np.degrees((yaw0 - tile_yaw + np.pi) % (2 * np.pi) - np.pi)
