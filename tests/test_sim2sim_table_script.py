@@ -80,7 +80,7 @@ def test_cases_picks_code_cases_and_an_unknown_one_is_refused(tmp_path):
     args = table.main.__globals__["argparse"].Namespace(
         episode_s=1.0, latency_ms=0.0, noise=False, push=False, seed=0, chunk=2, episodes=3,
         cells=["code"], cases=["code_commercial_straight_down"], resolution=0.025, robot=None,
-        contact_timeconst=0.01)
+        contact_timeconst=0.01, code_starts="own")
     tasks = table.tasks_for(args, onnx, set())
     assert {t[0] for t in tasks} == {"code_commercial_straight_down"}
     assert {t[3]["contact_timeconst"] for t in tasks} == {0.01}  # each episode's MuJoCo contact
@@ -88,3 +88,34 @@ def test_cases_picks_code_cases_and_an_unknown_one_is_refused(tmp_path):
     assert table.tasks_for(args, onnx, {"code_commercial_straight_down"}) == []
     with pytest.raises(SystemExit, match="--cases: no case 'code_nowhere'"):
         table.main(["--out", str(tmp_path), "--cells", "code", "--cases", "code_nowhere"])
+
+
+def test_the_code_cells_start_where_their_mjx_evaluation_does_and_are_paired_with_it(tmp_path):
+    # the U case's tile is padded (centred) to the straight one's size in the cases' atlas
+    cases = ["code_commercial_u_left_up", "code_commercial_straight_up"]
+    args = table.main.__globals__["argparse"].Namespace(
+        episode_s=0.2, latency_ms=0.0, noise=False, push=False, seed=3, chunk=2, episodes=3,
+        cells=["code"], cases=cases, resolution=0.025, robot=None, contact_timeconst=0.01,
+        code_starts="mjx", policy=POLICY, mjx=True, mjx_column=[], mjx_json=None, mjx_code=[])
+    starts = table.code_starts(POLICY, args)
+    for case in cases:  # in the case's own tile frame: on its spawn area, facing its heading
+        x, y, _, hx, hy, yaw, half = table.course_of(("case", "code", case, 0.025)).spawn
+        s = starts[case]
+        assert s.shape == (3, 3)
+        assert np.all(np.abs(s[:, 0] - x) <= hx) and np.all(np.abs(s[:, 1] - y) <= hy), case
+        assert np.all(np.abs((s[:, 2] - yaw + np.pi) % (2 * np.pi) - np.pi) <= half + 1e-5)
+    onnx = ROOT / "experiments/results/generalist_d2/policy.onnx"
+    tasks = table.tasks_for(args, onnx, set())
+    for case in cases:
+        got = np.concatenate([t[2] for t in tasks if t[0] == case])
+        np.testing.assert_allclose(got, starts[case])
+    args.code_starts = "own"  # sim2sim's own seeded starts are other places
+    own = np.concatenate([t[2] for t in table.tasks_for(args, onnx, set()) if t[0] == cases[0]])
+    assert np.abs(own - starts[cases[0]]).max() > 0.05
+    args.code_starts = "mjx"
+    cols = table.mjx_columns(args, tmp_path)  # MJX on those very starts (physics stepped)
+    mjx = json.loads((tmp_path / "mjx_code.json").read_text())
+    assert sorted(r["name"] for r in mjx["results"]) == sorted(cases)
+    assert mjx["robots_per_case"] == 3
+    assert mjx["physics_settings"]["terrain_contacts"] == "columns"
+    assert cols["MJX"] == {r["name"]: r["success"] for r in mjx["results"]}

@@ -21,9 +21,12 @@ the evaluation physics, run here first; use a GPU host) gives a paired gap. Each
 NAME=KEY=VALUE,...` adds an MJX column of the same starts with those env overrides, e.g. the
 sim2sim robot's joints (`robot.joint_damping=2.0,robot.implicit_damping=true`: go2_full.xml's
 damping, integrated implicitly as MuJoCo does), which separates the simulator from the robot.
-The code suite has no MJX evaluation yet: its starts are sim2sim's own (seeded, uniform on the
-spawn area). `--mjx-json` reads the MJX column from an earlier evaluation instead (not paired:
-its own robots; U-shaped, up).
+The `code` cases start where the MJX evaluation of --episodes robots per case starts them
+(study.cases.case_states), and --mjx / --mjx-column evaluate those very starts in MJX too
+(out/mjx*_code.json); `--code-starts own` keeps sim2sim's own seeded starts, uniform on the
+spawn area (every code run before 2026-11-30, session 47), with no paired MJX column.
+`--mjx-json` / `--mjx-code` read an MJX column from an earlier evaluation instead (not paired:
+its own robots).
 
 Robustness and cause-finding: --latency-ms, --noise, --push, --robot FILE.xml pass through to
 every episode (write each variant to its own --out).
@@ -116,6 +119,47 @@ def family_starts(policy_path: Path, spec) -> dict[str, list[tuple[str, np.ndarr
     return out
 
 
+def code_spec(args, overrides: tuple[str, ...] = ()):
+    """The MJX evaluation of the `code` cases that sim2sim pairs with: --episodes robots per
+    case, --episode-s, --seed (code_suite.py's spec at those numbers)."""
+    from mjx_stairs.study.specs import EvalSpec
+
+    return EvalSpec(robots_per_level=args.episodes, episode_length_s=args.episode_s,
+                    seed=args.seed, resolution=args.resolution, env_overrides=overrides)
+
+
+def code_cases(args) -> list[tuple]:
+    """[(name, tile)] of the `code` cases asked for (--cases, default all 24)."""
+    from mjx_stairs.study.cases import suite_cases
+
+    return [c for c in suite_cases("code", args.resolution) if not args.cases or c[0] in args.cases]
+
+
+def code_starts(policy_path: Path, args) -> dict[str, np.ndarray]:
+    """{case: poses [n, 3] x, y, yaw in the case's own tile frame}: where the MJX evaluation of
+    `code_spec` starts its robots (study.cases.case_states on the cases' atlas), so that the
+    `code` cells are paired with --mjx as the family cells are. The atlas pads every case to
+    the largest, centred (terrains.tile.pad_tile): that shift is taken off."""
+    from mjx_stairs.rl.policy import load_policy
+    from mjx_stairs.study import cases as cs
+    from mjx_stairs.study.evaluate import eval_env
+    from terrains.tile import pad_tile
+
+    found, n = code_cases(args), args.episodes
+    env = eval_env(load_policy(policy_path), cs.case_atlas(found), code_spec(args))
+    state = cs.case_states(env, len(found), n, args.seed)
+    qpos, tile = np.asarray(state.pipeline_state.qpos), np.asarray(state.info["tile"])
+    origin = np.asarray(env.tile_origin)
+    points = max(max(t.heights.shape) for _, t in found)
+    out = {}
+    for i, (name, t) in enumerate(found):
+        q, rows = qpos[i * n:(i + 1) * n], tile[i * n:(i + 1) * n]
+        shift = pad_tile(t, points).spawn[:2] - t.spawn[:2]
+        out[name] = np.column_stack([q[:, :2] - origin[rows] - shift,
+                                     2 * np.arctan2(q[:, 6], q[:, 3])])
+    return out
+
+
 def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
     """Every chunk of every cell not written yet."""
     opts = dict(episode_s=args.episode_s, latency_ms=args.latency_ms, noise=args.noise,
@@ -136,14 +180,14 @@ def tasks_for(args, onnx: Path, done: set[str]) -> list[tuple]:
                               args.direction), poses)
     if "code" in args.cells:
         from mjx_stairs.tools import contract as ct
-        from terrains.suites import load_suite
 
         c = ct.load_contract(onnx)
-        for case in load_suite("code"):
-            if case.name in done or (args.cases and case.name not in args.cases):
-                continue
-            spec = ("case", "code", case.name, args.resolution)
-            chunks(case.name, spec, s2s.starts(course_of(spec), c, args.episodes, args.seed))
+        todo = [name for name, _ in code_cases(args) if name not in done]
+        paired = code_starts(args.policy, args) if todo and args.code_starts == "mjx" else {}
+        for name in todo:
+            spec = ("case", "code", name, args.resolution)
+            chunks(name, spec, paired[name] if paired else
+                   s2s.starts(course_of(spec), c, args.episodes, args.seed))
     return out
 
 
@@ -158,8 +202,8 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
     policy = None
     for name, overrides in runs:
         col = cols.setdefault(name, {})
+        tag = "" if name == "MJX" else f"_{name}"
         for fam in (c for c in args.cells if c in FAMILIES):
-            tag = "" if name == "MJX" else f"_{name}"
             path = out / f"mjx{tag}_{fam}_{args.direction}.json"
             if not path.exists():
                 from mjx_stairs.rl.policy import load_policy
@@ -171,6 +215,14 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
             r = json.loads(path.read_text())
             col.update({cell_name(fam, SCHEDULE, lv - 1, args.direction): s
                         for lv, s in zip(r["levels"], r["success"], strict=True)})
+        if "code" in args.cells and args.code_starts == "mjx":
+            path = out / f"mjx{tag}_code.json"
+            if not path.exists():
+                from mjx_stairs.rl.policy import load_policy
+
+                policy = policy or load_policy(args.policy)
+                mjx_code(path, policy, args, overrides)
+            col.update({r["name"]: r["success"] for r in json.loads(path.read_text())["results"]})
     if args.mjx_json:
         r = json.loads(Path(args.mjx_json).read_text())
         r = r["policies"][args.mjx_policy] if "policies" in r else r
@@ -183,6 +235,21 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
         results = json.loads(Path(path).read_text())["results"]
         cols[name] = {r["name"]: r["success"] for r in results}
     return cols
+
+
+def mjx_code(path: Path, policy, args, overrides: tuple[str, ...]) -> None:
+    """The MJX evaluation of the `code` cases on `code_starts`'s starts, written to `path`:
+    {"results": [case records of study.cases], run facts}."""
+    from mjx_stairs.study import cases as cs
+    from mjx_stairs.study.evaluate import eval_config, physics_settings
+
+    spec = code_spec(args, overrides)
+    records = cs.success_by_case({"policy": policy}, code_cases(args), spec)["policy"]
+    env_cfg = eval_config(policy, spec)
+    atomic.write_text(path, json.dumps({
+        "robots_per_case": args.episodes, "episode_length_s": args.episode_s, "seed": args.seed,
+        "env_overrides": list(overrides), "physics_settings": physics_settings(env_cfg),
+        "policy": str(args.policy), "results": records}, indent=1) + "\n")
 
 
 def cell_direction(cell: str, direction: str) -> str:
@@ -252,7 +319,11 @@ def main(argv: list[str] | None = None) -> None:
                    "evaluation physics, whose --mjx columns these are)")
     p.add_argument("--robot", default=None, help="a Go2 MJCF (default: ours, full geometry)")
     p.add_argument("--mjx", action="store_true", help="run the MJX evaluation of the same "
-                   "starts first (family cells; a GPU host)")
+                   "starts first (a GPU host for many cells)")
+    p.add_argument("--code-starts", default="mjx", choices=["mjx", "own"],
+                   help="the code cases' starts: the MJX evaluation's of --episodes robots per "
+                   "case (paired with --mjx and --mjx-column), or sim2sim's own (seeded, "
+                   "uniform on the spawn area: the runs before 2026-11-30 session 47)")
     p.add_argument("--mjx-column", action="append", default=[], metavar="NAME=KEY=VALUE,...",
                    help="another MJX column of the same starts with these env overrides")
     p.add_argument("--mjx-only", action="store_true", help="compute the MJX columns (cached in "
