@@ -119,3 +119,6 @@ def test_the_code_cells_start_where_their_mjx_evaluation_does_and_are_paired_wit
     assert mjx["robots_per_case"] == 3
     assert mjx["physics_settings"]["terrain_contacts"] == "columns"
     assert cols["MJX"] == {r["name"]: r["success"] for r in mjx["results"]}
+    args.cases = cases[:1]  # a file of other cases is not reused
+    assert set(table.mjx_columns(args, tmp_path)["MJX"]) == {cases[0]}
+    assert len(json.loads((tmp_path / "mjx_code.json").read_text())["results"]) == 1

@@ -217,7 +217,9 @@ def mjx_columns(args, out: Path) -> dict[str, dict[str, float]]:
                         for lv, s in zip(r["levels"], r["success"], strict=True)})
         if "code" in args.cells and args.code_starts == "mjx":
             path = out / f"mjx{tag}_code.json"
-            if not path.exists():
+            want = {name for name, _ in code_cases(args)}
+            if not path.exists() or want != {r["name"] for r in json.loads(
+                    path.read_text())["results"]}:  # none yet, or of other cases
                 from mjx_stairs.rl.policy import load_policy
 
                 policy = policy or load_policy(args.policy)
