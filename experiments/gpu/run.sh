@@ -566,19 +566,25 @@ run_step() {
       background "delay_grid/$name" python3 experiments/damping_gt.py "$BG/delay_grid/$name" \
         --policy "$p" --cell u_shaped:test:5 --robots 200 --what gt --configs grid \
         --jobs "${GRID_JOBS:-10}" ;;
-    # issue 25: a policy's sim-to-sim table (S2S_POLICY: a run trained in this command or carried
-    # in .carry/, default stage2_u_robot) on the paper's test levels (S2S_CELLS, default u_shaped;
-    # S2S_DIRECTION up|down), S2S_EPISODES (200) per level: its two MJX columns of the very starts
+    # issue 25: a policy's sim-to-sim table (S2S_POLICY: a run trained in this command, carried
+    # in .carry/ or committed, default stage2_u_robot) on the paper's test levels (S2S_CELLS,
+    # default u_shaped; S2S_DIRECTION up|down), S2S_EPISODES (200) per level: its two MJX
+    # columns of the very starts
     # here on the GPU first (the evaluation physics; "robot": the sim2sim robot's joints, damping
     # 2 integrated implicitly), then sim2sim on the host's CPUs in the background, into
-    # $OUT/sim2sim/<policy>_<direction>/
+    # $OUT/sim2sim/<policy>_<direction>/. S2S_CELLS=code: the code cases, paired (their MJX
+    # starts); S2S_ONNX (a folder): its policy.onnx and sidecar are the export run (e.g. a wall-rule
+    # export, experiments/results/<run>/wallrule); S2S_ARGS (a+b): more sim2sim_table.py flags,
+    # e.g. --contact-timeconst+0.01+--robot+FILE+--mjx-column+wall=height_map.occlusion_samples=32
     sim2sim-policy)
       name=${S2S_POLICY:-stage2_u_robot}; dir=${S2S_DIRECTION:-up}
-      p=$(trained_policy "$name")
+      p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
       d="$BG/sim2sim/${name}_$dir"; mkdir -p "$d"
+      [ -n "${S2S_ONNX:-}" ] && cp "$S2S_ONNX"/policy.onnx* "$d/"
       s2s=(--policy "$p" --out "$d" --cells ${S2S_CELLS:-u_shaped} --direction "$dir"
            --episodes "${S2S_EPISODES:-200}" --mjx
            --mjx-column "robot=robot.joint_damping=2.0,robot.implicit_damping=true")
+      [ -n "${S2S_ARGS:-}" ] && s2s+=(${S2S_ARGS//+/ })
       python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" --mjx-only 2>&1 | grep -v warp
       background "sim2sim/${name}_$dir" python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" \
         --workers "${S2S_WORKERS:-14}" ;;
