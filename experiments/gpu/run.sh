@@ -146,6 +146,10 @@ trained_policy() {  # trained_policy NAME: the policy of run NAME trained in thi
   local p=/tmp/policies/$1.npz; [ -f "$p" ] || p=.carry/$1/policy.npz; echo "$p"
 }
 
+any_policy() {  # any_policy NAME: trained_policy NAME, else experiments/results/NAME/ (committed)
+  local p; p=$(trained_policy "$1"); [ -f "$p" ] || p=experiments/results/$1/policy.npz; echo "$p"
+}
+
 background() {  # background NAME CMD...: CMD with JAX_PLATFORMS=cpu, in the background, stopped
   # 20 s before the deadline; it writes $BG/NAME/, its log goes to $BG/NAME.log
   local name=$1; shift
@@ -252,7 +256,7 @@ eval_names() {
   local name p env=() out
   [ -n "${EVAL_ENV:-}" ] && env=(--env ${EVAL_ENV//+/ })
   for name in ${EVAL_NAMES//+/ }; do
-    p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
+    p=$(any_policy "$name")
     out=$OUT/eval/$name${EVAL_DIRECTION:+_$EVAL_DIRECTION}${EVAL_TAG:+_$EVAL_TAG}${EVAL_SEED:+_seed$EVAL_SEED}/${EVAL_FAMILIES//+/-}
     [ "$(left)" -lt 90 ] && { echo "no time left for $name"; break; }
     timeout $(( $(left) - 15 )) python3 -m mjx_stairs eval --checkpoint "$p" --robots 1000 \
@@ -562,7 +566,7 @@ run_step() {
     stage2-robot-history) train stage2_u_robot_history experiments/stage2_u_robot_history.toml ;;
     delay-grid)
       name=${GRID_POLICY:-stage2_u_robot_corner}
-      p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
+      p=$(any_policy "$name")
       background "delay_grid/$name" python3 experiments/damping_gt.py "$BG/delay_grid/$name" \
         --policy "$p" --cell u_shaped:test:5 --robots 200 --what gt --configs grid \
         --jobs "${GRID_JOBS:-10}" ;;
@@ -578,7 +582,7 @@ run_step() {
     # e.g. --contact-timeconst+0.01+--robot+FILE+--mjx-column+wall=height_map.occlusion_samples=32
     sim2sim-policy)
       name=${S2S_POLICY:-stage2_u_robot}; dir=${S2S_DIRECTION:-up}
-      p=$(trained_policy "$name"); [ -f "$p" ] || p=experiments/results/$name/policy.npz
+      p=$(any_policy "$name")
       d="$BG/sim2sim/${name}_$dir"; mkdir -p "$d"
       [ -n "${S2S_ONNX:-}" ] && cp "$S2S_ONNX"/policy.onnx* "$d/"
       s2s=(--policy "$p" --out "$d" --cells ${S2S_CELLS:-u_shaped} --direction "$dir"

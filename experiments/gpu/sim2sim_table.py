@@ -90,6 +90,12 @@ def eval_spec(args, family: str, overrides: tuple[str, ...] = ()):
                     resolution=args.resolution, tile_size=10.0, env_overrides=overrides)
 
 
+def tile_poses(qpos: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """[n, 3] x, y, yaw of robots' reset qpos [n, >= 7] in the frame of a tile at `origin`
+    (the reset's base quaternion is a yaw alone)."""
+    return np.column_stack([qpos[:, :2] - origin, 2 * np.arctan2(qpos[:, 6], qpos[:, 3])])
+
+
 def family_starts(policy_path: Path, spec) -> dict[str, list[tuple[str, np.ndarray]]]:
     """{cell: [(variant, poses [n, 3] x, y, yaw in its tile frame)]}: the starts of `mjx-stairs
     eval` (study.evaluate.success_by_level's resets of the EvalSpec `spec`) on each level of its
@@ -111,10 +117,8 @@ def family_starts(policy_path: Path, spec) -> dict[str, list[tuple[str, np.ndarr
         groups = []
         for col in range(cols):
             mine = tile[rows] == i * cols + col
-            q = qpos[rows][mine]
-            yaw = 2 * np.arctan2(q[:, 6], q[:, 3])
-            xy = q[:, :2] - origin[i * cols + col]
-            groups.append((names[col % len(names)], np.column_stack([xy, yaw])))
+            poses = tile_poses(qpos[rows][mine], origin[i * cols + col])
+            groups.append((names[col % len(names)], poses))
         out[cell_name(spec.family, SCHEDULE, lv, spec.direction)] = groups
     return out
 
@@ -130,9 +134,15 @@ def code_spec(args, overrides: tuple[str, ...] = ()):
 
 def code_cases(args) -> list[tuple]:
     """[(name, tile)] of the `code` cases asked for (--cases, default all 24)."""
+    return list(_code_cases(args.resolution, tuple(args.cases)))
+
+
+@functools.lru_cache(maxsize=4)
+def _code_cases(resolution: float, names: tuple[str, ...]) -> tuple:
+    """The tiles built once per process (starts, tasks and the MJX column all ask for them)."""
     from mjx_stairs.study.cases import suite_cases
 
-    return [c for c in suite_cases("code", args.resolution) if not args.cases or c[0] in args.cases]
+    return tuple(c for c in suite_cases("code", resolution) if not names or c[0] in names)
 
 
 def code_starts(policy_path: Path, args) -> dict[str, np.ndarray]:
@@ -153,10 +163,9 @@ def code_starts(policy_path: Path, args) -> dict[str, np.ndarray]:
     points = max(max(t.heights.shape) for _, t in found)
     out = {}
     for i, (name, t) in enumerate(found):
-        q, rows = qpos[i * n:(i + 1) * n], tile[i * n:(i + 1) * n]
+        rows = slice(i * n, (i + 1) * n)
         shift = pad_tile(t, points).spawn[:2] - t.spawn[:2]
-        out[name] = np.column_stack([q[:, :2] - origin[rows] - shift,
-                                     2 * np.arctan2(q[:, 6], q[:, 3])])
+        out[name] = tile_poses(qpos[rows], origin[tile[rows]] + shift)
     return out
 
 
