@@ -187,3 +187,41 @@ def test_a_training_step_run_again_resumes_from_what_it_kept(tmp_path):
     assert (tmp_path / "keep" / "stage1" / "state.npz").read_text() == "state 1\n"
     third, _ = command(3, FRESH="1")
     assert "--resume" not in third
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+@pytest.mark.parametrize("variables, gpu_call", [
+    ({}, "--mjx --mjx-column robot="),  # the two default MJX columns on the GPU first
+    ({"S2S_MJX": "0"}, None),  # MuJoCo only: the GPU is left to the trainings
+    ({"S2S_MJX": "0", "S2S_ARGS": "--mjx-column+wall=k=1"}, "--mjx-column wall=k=1"),
+])
+def test_sim2sim_policy_runs_mjx_only_when_a_column_is_asked_and_resumes_a_folder(
+        tmp_path, variables, gpu_call):
+    """sim2sim-policy: the --mjx-only GPU call runs when an MJX column is asked for (S2S_MJX=0
+    drops the two default ones), the CPU run in the background always, and S2S_FROM's cells and
+    columns are where that run looks for what is done (its out folder, brought back in $OUT).
+    python3 is a stand-in that records its arguments."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    calls = tmp_path / "calls.txt"
+    (bin_dir / "python3").write_text(f'#!/bin/sh\necho "$@" >> {calls}\n')
+    (bin_dir / "python3").chmod(0o755)
+    earlier = tmp_path / "earlier"
+    (earlier / "cells").mkdir(parents=True)
+    (earlier / "cells" / "code_x.json").write_text("{}")
+    (earlier / "mjx_wall_code.json").write_text("{}")
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path / "out"),
+           "HOME": str(tmp_path), "S2S_POLICY": "p", "S2S_CELLS": "code",
+           "S2S_FROM": str(earlier), **variables}
+    subprocess.run(["bash", str(RUN), "200", "sim2sim-policy"], env=env, capture_output=True,
+                   text=True, timeout=60, cwd=RUN.parents[2], check=True)
+    lines = calls.read_text().splitlines()
+    mjx_only = [c for c in lines if "--mjx-only" in c]
+    (cpu,) = [c for c in lines if "sim2sim_table.py" in c and "--mjx-only" not in c]
+    assert "--cells code" in cpu and "--workers 14" in cpu
+    if gpu_call is None:
+        assert not mjx_only and "--mjx" not in cpu, lines
+    else:
+        assert len(mjx_only) == 1 and gpu_call in mjx_only[0], lines
+    out = tmp_path / "out" / "sim2sim" / "p_up"
+    assert (out / "cells" / "code_x.json").exists() and (out / "mjx_wall_code.json").exists()

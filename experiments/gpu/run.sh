@@ -579,17 +579,24 @@ run_step() {
     # $OUT/sim2sim/<policy>_<direction>/. S2S_CELLS=code: the code cases, paired (their MJX
     # starts); S2S_ONNX (a folder): its policy.onnx and sidecar are the export run (e.g. a wall-rule
     # export, experiments/results/<run>/wallrule); S2S_ARGS (a+b): more sim2sim_table.py flags,
-    # e.g. --contact-timeconst+0.01+--robot+FILE+--mjx-column+wall=height_map.occlusion_samples=32
+    # e.g. --contact-timeconst+0.01+--robot+FILE+--mjx-column+wall=height_map.occlusion_samples=32.
+    # S2S_MJX=0: without the two default MJX columns (then no GPU is used unless S2S_ARGS names a
+    # --mjx-column: MuJoCo only while the GPUs train, a later call adds the columns); S2S_FROM (a
+    # folder an earlier call brought back): its cells and MJX columns are kept, only what is
+    # missing runs
     sim2sim-policy)
       name=${S2S_POLICY:-stage2_u_robot}; dir=${S2S_DIRECTION:-up}
       p=$(any_policy "$name")
       d="$BG/sim2sim/${name}_$dir"; mkdir -p "$d"
+      [ -n "${S2S_FROM:-}" ] && cp -r "$S2S_FROM"/. "$d/"
       [ -n "${S2S_ONNX:-}" ] && cp "$S2S_ONNX"/policy.onnx* "$d/"
       s2s=(--policy "$p" --out "$d" --cells ${S2S_CELLS:-u_shaped} --direction "$dir"
-           --episodes "${S2S_EPISODES:-200}" --mjx
+           --episodes "${S2S_EPISODES:-200}")
+      [ "${S2S_MJX:-1}" = 0 ] || s2s+=(--mjx
            --mjx-column "robot=robot.joint_damping=2.0,robot.implicit_damping=true")
       [ -n "${S2S_ARGS:-}" ] && s2s+=(${S2S_ARGS//+/ })
-      python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" --mjx-only 2>&1 | grep -v warp
+      [[ " ${s2s[*]} " == *" --mjx"* ]] &&
+        python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" --mjx-only 2>&1 | grep -v warp
       background "sim2sim/${name}_$dir" python3 experiments/gpu/sim2sim_table.py "${s2s[@]}" \
         --workers "${S2S_WORKERS:-14}" ;;
     # issue 19: tables of the reference physics re-evaluated in the evaluation physics (every
