@@ -55,6 +55,14 @@ class CurriculumConfig:
                               f"positive sum, got {list(w)}")
 
 
+# Config keys a resumed run cannot act on: what they set is drawn at a robot's first reset and kept
+# in the env state a checkpoint holds (the runner's resume warning says so beside the change)
+RESUME_INERT = {
+    "env.curriculum.family_weights": "each robot keeps the family drawn at its first reset",
+    "env.curriculum.initial_max_level": "it sets the level of a robot's first reset only",
+}
+
+
 class TileTable:
     """Per-family column tables of an atlas, as device arrays.
 

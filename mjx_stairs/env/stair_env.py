@@ -45,11 +45,11 @@ __all__ = ["STEP_INPUTS", "StairEnv"]
 
 class StairEnv(Env):
     """Go2 climbing the stairs of an atlas. See the module docstring for the step."""
+    RESUME_INERT = cur.RESUME_INERT  # {config key: why changing it on a resume does nothing}
 
     def __init__(self, atlas: Any, config: EnvConfig | None = None):
-        """Build the model with the heightfield of `atlas` (a terrains.Atlas: heights,
-        resolution, rows, cols, families and per-tile tables) and the per-tile tables on the
-        device; `config`: env settings (None: the defaults)."""
+        """The model with the heightfield of `atlas` (a terrains.Atlas: heights, resolution,
+        rows, cols, families, per-tile tables), its tables on the device; `config`: settings."""
         config = EnvConfig() if config is None else config
         if not config.waypoint_lookahead_m > 0:
             raise ValueError(f"env.waypoint_lookahead_m: must be > 0, got "

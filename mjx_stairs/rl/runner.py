@@ -59,15 +59,19 @@ class RunResult(NamedTuple):
 
 
 
-def _config_diff(a: dict, b: dict, prefix: str = "") -> list[str]:
+def _config_diff(a: dict, b: dict, prefix: str = "", inert: dict | None = None) -> list[str]:
+    """"key: old -> new" for every value that differs; a key in `inert` (the env's
+    RESUME_INERT: {key: why}) is said to do nothing on a resume, and why."""
     out = []
     for k in sorted(set(a) | set(b)):
         key = f"{prefix}.{k}" if prefix else k
         va, vb = a.get(k), b.get(k)
         if isinstance(va, dict) and isinstance(vb, dict):
-            out.extend(_config_diff(va, vb, key))
+            out.extend(_config_diff(va, vb, key, inert))
         elif va != vb:
-            out.append(f"{key}: {va!r} -> {vb!r}")
+            why = (inert or {}).get(key)
+            out.append(f"{key}: {va!r} -> {vb!r}"
+                       + (f" (no effect on a resumed run: {why})" if why else ""))
     return out
 
 
@@ -121,7 +125,7 @@ def run(
     tc = config.train
     trainer = build_trainer(config, env, mesh)
     run_dir = _run_dir(tc, run_dir, resume)
-    state = _start(trainer, config, run_dir, resume)
+    state = _start(trainer, config, run_dir, resume, getattr(env, "RESUME_INERT", {}))
     compiled, compile_s = compiled_chunk(trainer, state)
     iteration = int(jax.device_get(state.iteration))
     K, steps_per_iter = tc.iterations_per_chunk, tc.num_envs * tc.unroll_length
@@ -224,9 +228,11 @@ def _choose_run_dir(tc, run_dir: str | Path | None, resume: bool | str | Path) -
     return run_dir
 
 
-def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -> TrainState:
-    """The state to train from: resumed from a checkpoint, or fresh (params and normaliser from
-    ``config.init_from`` when set); a fresh run writes config.json (process 0)."""
+def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path,
+           inert: dict | None = None) -> TrainState:
+    """The state to train from: resumed from a checkpoint (a changed config warned of, `inert`
+    keys as doing nothing), or fresh (params and normaliser from ``config.init_from`` when set);
+    a fresh run writes config.json (process 0)."""
     main = distributed.is_main()
     env = getattr(config, "env", None)  # the observation's layout (rl knows no env config)
     hist, delay = getattr(env, "obs_history", 0), getattr(env, "obs_action_delay", False)
@@ -238,7 +244,7 @@ def _start(trainer: Trainer, config, run_dir: Path, resume: bool | str | Path) -
             raise checkpoint.CheckpointError(f"{ckpt_dir}: no checkpoint to resume from")
         state, meta = load_state(path, trainer,
                                  widen=lambda saved: appends_terms(saved, hist, delay, damping))
-        diff = _config_diff(meta.get("config", {}), config_dict(config))
+        diff = _config_diff(meta.get("config", {}), config_dict(config), inert=inert)
         if diff and main:
             warnings.warn(f"resuming {path} with a changed config: {'; '.join(diff)}",
                           stacklevel=3)

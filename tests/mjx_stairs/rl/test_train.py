@@ -444,3 +444,37 @@ def test_chunk_metrics_pool_an_envs_ratio_metrics():
     assert out["level/a"] == pytest.approx(4.0) and np.isnan(out["level/b"])
     assert out["level"] == 3.0 and out["episode/return"] == 3.0
     assert not any("#" in k for k in out)
+
+
+def test_a_resume_says_which_changed_keys_it_cannot_act_on(tmp_path, monkeypatch):
+    """The resume warning lists every changed key, and one the env names in RESUME_INERT (drawn
+    at a robot's first reset and kept in the state) with why it does nothing; the stair env's
+    inert keys are keys of an experiment's config, so that its changes are the ones marked."""
+    from mjx_stairs.env.stair_env import StairEnv
+    from mjx_stairs.rl.policy import config_dict
+    from mjx_stairs.study import experiment
+
+    half = runner.run(_run_cfg(tmp_path / "a", total_iterations=2), TOY)
+    ck = half.run_dir / "checkpoints" / "state_00000002.npz"
+    monkeypatch.setattr(TOY, "RESUME_INERT", {"train.keep_checkpoints": "a toy reason"},
+                        raising=False)
+    with pytest.warns(UserWarning) as caught:
+        runner.run(_run_cfg(tmp_path / "b", keep_checkpoints=3, checkpoint_every=2), TOY,
+                   run_dir=tmp_path / "b" / "r", resume=ck)
+    (said,) = [str(w.message) for w in caught if "changed config" in str(w.message)]
+    assert "train.keep_checkpoints: 2 -> 3 (no effect on a resumed run: a toy reason)" in said
+    assert "train.checkpoint_every: 1 -> 2" in said  # a change it acts on: no remark
+    assert said.count("no effect") == 1
+
+    config = experiment.load(ROOT / "experiments" / "generalist_from_stage1_mix_told_log.toml")[0]
+    before = config_dict(config)
+    after = config_dict(replace(config, env=replace(config.env, curriculum=replace(
+        config.env.curriculum, family_weights=(0.2, 0.2, 0.2, 0.2, 0.2)))))
+    diff = runner._config_diff(before, after, inert=StairEnv.RESUME_INERT)
+    assert diff == ["env.curriculum.family_weights: [0.6, 0.1, 0.1, 0.1, 0.1] -> "
+                    "[0.2, 0.2, 0.2, 0.2, 0.2] (no effect on a resumed run: each robot keeps the "
+                    "family drawn at its first reset)"]
+    for key in StairEnv.RESUME_INERT:
+        section = before
+        for part in key.split("."):
+            section = section[part]  # a KeyError: a renamed key the warning would miss
