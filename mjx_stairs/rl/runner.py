@@ -60,7 +60,7 @@ class RunResult(NamedTuple):
 
 
 def _config_diff(a: dict, b: dict, prefix: str = "", inert: dict | None = None) -> list[str]:
-    """"key: old -> new" for every value that differs; a key in `inert` (the env's
+    """Every value that differs, as "key: old -> new"; a key in `inert` (the env's
     RESUME_INERT: {key: why}) is said to do nothing on a resume, and why."""
     out = []
     for k in sorted(set(a) | set(b)):
