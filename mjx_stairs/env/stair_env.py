@@ -15,7 +15,7 @@ Where ours differs from the authors' Isaac Lab setup:
   casting (mjx.ray does not see heightfields); for our own terrain it is exact.
 - Everything is computed from qpos/qvel, so a reset needs no extra forward pass.
 - The contact penalties read MJX contacts of our collision spheres: trunk corners stand for
-  base/head, knee spheres for thighs, mid-shin spheres for calves.
+  base/head, knee spheres (thigh chains) for thighs, mid-shin spheres (calf chains) for calves.
 - Regularisers are always on (the authors switch most on once the curriculum's top level is
   reached; a cross-robot gate does not fit a per-robot env).
 """
@@ -40,6 +40,7 @@ from mjx_stairs.env.geometry import Kinematics, base_kinematics, wrap_angle, yaw
 from mjx_stairs.env.terrain import Terrain
 from mjx_stairs.env.tiles import TileTables, waypoint_on
 from mjx_stairs.sim import robot as rb
+from mjx_stairs.sim import touch
 
 __all__ = ["STEP_INPUTS", "StairEnv"]
 
@@ -68,12 +69,11 @@ class StairEnv(Env):
                              "guard and pack_state keep only STEP_INPUTS")
         self._ids = ids = self.robot.ids
         mj = self.robot.mj_model
-        self.terrain = Terrain(self.robot, self.atlas_shape, self.resolution,
-                               config.height_map)
+        self.terrain = Terrain(self.robot, self.atlas_shape, self.resolution, config.height_map)
         self.tiles = TileTables(atlas)
         self.tile_origin = self.tiles.origin  # [n, 2] host copy
         self._table = cur.TileTable(np.asarray(atlas.family), int(atlas.cols), len(self.families))
-        self.contact_rows = rb.sphere_contact_rows(mj, ids)
+        self.contact_rows = touch.sphere_contact_rows(mj, ids)
         self.actuate = Actuator(self._mx, ids, config, self.terrain, self.tiles)
 
         self._nominal = jnp.asarray(rb.NOMINAL_JOINT_POS)
@@ -262,7 +262,7 @@ class StairEnv(Env):
             planar_goal_distance < c.rewards.straight_within, jnp.linalg.norm(to_goal), path
         )
         with jax.named_scope("contacts"):
-            touching = rb.sphere_contacts(data, self.contact_rows)
+            touching = touch.sphere_contacts(data, self.contact_rows)
         foot = touching["foot"]
         q = rw.Quantities(
             time=(info["step"] + 1) * self._dt,

@@ -46,12 +46,13 @@ def build_model(
     """The Go2 standing among `boxes` [M, 6] (cx, cy, cz, hx, hy, hz), PD as actuators.
 
     Collision spheres are spheres whatever `config.terrain_contacts` says; mid-shin spheres
-    collide when `config.shin_collision`, the head and the calf chains are there when
-    `config.head_collision` and `config.calf_collision` say so. Gains are `config.kp` /
-    `config.kd`, limits the reference torque limits times `config.torque_scale`, the joints'
-    passive damping `config.joint_damping` (None: the MJCF's). `heightfield` = (heights, resolution)
-    stands the robot on that heightfield instead (MuJoCo's own heightfield collider, the
-    terrain shape MJX sees: for telling the terrain's shape from MJX's solver and collider).
+    collide when `config.shin_collision`, the head and the calf and thigh chains are there when
+    `config.head_collision`, `config.calf_collision` and `config.thigh_collision` say so.
+    Gains are `config.kp` / `config.kd`, limits the reference torque limits times
+    `config.torque_scale`, the joints' passive damping `config.joint_damping` (None: the MJCF's).
+    `heightfield` = (heights, resolution) stands the robot on that heightfield instead (MuJoCo's
+    own heightfield collider, the terrain shape MJX sees: for telling the terrain's shape from
+    MJX's solver and collider).
     """
     config = config or rb.RobotConfig()
     solver = solver or DEFAULT_SOLVER

@@ -19,11 +19,10 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from mujoco import mjx
-from mujoco.mjx._src import collision_driver
 
 from mjx_stairs.config import ConfigError
-from mjx_stairs.sim import contact, solref  # contact registers the 'nearest', 'columns' colliders
-from mjx_stairs.sim.geoms import HEAD, add_calf_chains, add_head, calf_chain_ids
+from mjx_stairs.sim import capsule, contact, solref  # they register our colliders
+from mjx_stairs.sim.geoms import HEAD, add_capsules, add_chains, add_head, chain_ids
 
 ASSET = Path(__file__).parent / "assets" / "go2.xml"
 
@@ -100,6 +99,12 @@ class RobotConfig:
     # Eleven spheres more along each calf (go2_full.xml's bowed calf: geoms.CALF_SHAPE), counted
     # as calf contacts. Off: go2.xml's spheres alone, as every policy up to 2026-11-29 trained.
     calf_collision: bool = False
+    # Nine spheres along each thigh (go2_full.xml's thigh capsule: geoms.THIGH_SHAPE), counted as
+    # knee contacts (rewards.contact_trunk_thigh). Off: as every policy up to 2026-12-01 trained.
+    thigh_collision: bool = False
+    # The calves and thighs those two add as go2_full.xml's capsules, collided by sim.capsule (two
+    # contacts a capsule), not as sphere chains (two a sphere): the same shape, fewer solver rows.
+    limb_capsules: bool = False
     # Fixed action delay (s) in whole physics steps (the previous target holds), at most one policy
     # step, as sim2sim's --latency-ms (`--env robot.action_delay_s=0.02`; or drawn per robot).
     action_delay_s: float = 0.0
@@ -198,7 +203,8 @@ class RobotIds:
     knee_geoms: np.ndarray  # [4]
     shin_geoms: np.ndarray  # [4]
     trunk_geoms: np.ndarray  # [4] corners (+ the head with head_collision: [5])
-    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 8 with calf_collision, else 0)
+    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 11 with calf_collision, else 0)
+    thigh_geoms: np.ndarray  # [4, k] each leg's thigh chain (k = 9 with thigh_collision, else 0)
     qpos_joints: np.ndarray  # [12] qpos addresses of the joints, in JOINT_NAMES order
     qvel_joints: np.ndarray  # [12] qvel addresses of the joints
 
@@ -254,7 +260,9 @@ def build_mj_model(heights: np.ndarray | None, resolution: float,
     elif config.terrain_contacts != "mjx":
         raise ValueError("robot.terrain_contacts must be 'mjx', 'nearest' or 'columns', got "
                          f"{config.terrain_contacts!r}")
-    return spec.compile()
+    model = spec.compile()
+    capsule.check(model)
+    return model
 
 
 def apply_robot_settings(spec: mujoco.MjSpec, config: RobotConfig) -> None:
@@ -264,8 +272,11 @@ def apply_robot_settings(spec: mujoco.MjSpec, config: RobotConfig) -> None:
     set_joint_damping(spec, config)
     if config.head_collision:
         add_head(spec)
+    add = add_capsules if config.limb_capsules else add_chains
     if config.calf_collision:
-        add_calf_chains(spec, LEGS)
+        add(spec, LEGS, "calf", "{leg}_shin")
+    if config.thigh_collision:
+        add(spec, LEGS, "thigh", "{leg}_knee")
     solref.set_timeconst(spec, config.contact_timeconst)
     for act in spec.actuators:  # the PD's clamp (pd_torque: torque_scale, motor_strength) is
         act.ctrllimited = False  # the only one; go2.xml's ctrlrange would cap it at 1x
@@ -316,7 +327,8 @@ def robot_ids(model: mujoco.MjModel) -> RobotIds:
         knee_geoms=geoms("knee"),
         shin_geoms=geoms("shin"),
         trunk_geoms=geoms("trunk"),
-        calf_geoms=calf_chain_ids(model, LEGS),
+        calf_geoms=chain_ids(model, LEGS, "calf"),
+        thigh_geoms=chain_ids(model, LEGS, "thigh"),
         qpos_joints=np.array([int(j.qposadr[0]) for j in joints], np.int32),
         qvel_joints=np.array([int(j.dofadr[0]) for j in joints], np.int32),
     )
@@ -352,49 +364,3 @@ def standing_qpos(xy: tuple[float, float] = (0.0, 0.0), z: float = 0.445) -> np.
     qpos[3] = 1.0
     qpos[7:] = NOMINAL_JOINT_POS
     return qpos
-
-
-def sphere_contact_rows(mj_model: mujoco.MjModel, ids: RobotIds) -> dict[str, np.ndarray | None]:
-    """{group: [4, rows per leg] rows of MJX's contact array} for each sphere group (None for
-    a group that does not collide); a leg's "shin" rows are its mid-shin sphere's and its calf
-    chain's (with calf_collision), the trunk group's [4 or 5, ncon] one sphere each.
-
-    MJX lays contacts out by collision-function group, each geom pair repeated ncon times; the
-    layout is static, so it is read once here (tests check it against a forward pass).
-    """
-    rows: dict[int, list[int]] = {}
-    i = 0
-    for key, pairs in collision_driver._geom_groups(mj_model).items():
-        ncon = collision_driver._COLLISION_FUNC[key.types].ncon
-        for g1, g2, _ in pairs:
-            for g in (g1, g2):
-                rows.setdefault(int(g), [])
-            rows[int(g2)].extend(range(i, i + ncon))
-            rows[int(g1)].extend(range(i, i + ncon))
-            i += ncon
-    out = {}
-    calf = [ids.shin_geoms[i:i + 1].tolist() + ids.calf_geoms[i].tolist() for i in range(4)]
-    for group, geoms in (
-        ("foot", ids.foot_geoms[:, None]),
-        ("knee", ids.knee_geoms[:, None]),
-        ("shin", calf),  # the mid-shin sphere and the calf chain: one calf's contacts
-        ("trunk", ids.trunk_geoms[:, None]),
-    ):
-        per = [sum((rows.get(int(g), []) for g in leg), []) for leg in geoms]
-        if all(len(p) == 0 for p in per):  # a group without collision, e.g. shins switched off
-            out[group] = None
-        elif len({len(p) for p in per}) != 1:
-            raise ValueError(f"collision spheres of group {group!r} collide unevenly: {per}")
-        else:
-            out[group] = np.array(per, np.int32)
-    return out
-
-
-def sphere_contacts(data: mjx.Data, rows: dict[str, np.ndarray | None]) -> dict[str, jnp.ndarray]:
-    """{group: [n] bool} which collision spheres touch the terrain (rows: sphere_contact_rows;
-    n = 4, the trunk 5 with the head)."""
-    dist = data._impl.contact.dist
-    return {
-        g: jnp.zeros(4, bool) if r is None else jnp.any(dist[r] < 1e-3, axis=-1)
-        for g, r in rows.items()
-    }

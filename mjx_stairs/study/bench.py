@@ -206,6 +206,8 @@ def _header(config: ExperimentConfig, env) -> dict[str, Any]:
             "shin_collision": config.env.robot.shin_collision,
             "head_collision": config.env.robot.head_collision,
             "calf_collision": config.env.robot.calf_collision,
+            "thigh_collision": config.env.robot.thigh_collision,
+            "limb_capsules": config.env.robot.limb_capsules,
             "terrain_contacts": config.env.robot.terrain_contacts,
         },
         "network": {"conv_impl": config.network.conv_impl},

@@ -136,6 +136,7 @@ def physics_settings(env: StairEnv | EnvConfig) -> dict[str, Any]:
             # the robot's own, from the policy's config (or an override): not the preset's
             "joint_damping": robot.joint_damping, "implicit_damping": robot.implicit_damping,
             "head_collision": robot.head_collision, "calf_collision": robot.calf_collision,
+            "thigh_collision": robot.thigh_collision, "limb_capsules": robot.limb_capsules,
             "action_delay_s": robot.action_delay_s,
             "pd_kd": robot.delayed_kd,  # the PD's damping gain at that delay (kd_per_delay)
             "contact_timeconst": robot.contact_timeconst}

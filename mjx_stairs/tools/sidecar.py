@@ -125,6 +125,8 @@ def _training(cfg: EnvConfig) -> dict[str, Any]:
         "joint_damping_integration": "implicit" if cfg.robot.implicit_damping else "explicit",
         "head_collision": cfg.robot.head_collision,
         "calf_collision": cfg.robot.calf_collision,
+        "thigh_collision": cfg.robot.thigh_collision,
+        "limb_capsules": cfg.robot.limb_capsules,
         # every contact's solref time constant (robot and stairs); the MJCF's is MuJoCo's default
         "contact_timeconst_s": cfg.robot.contact_timeconst or solref.MJCF_TIMECONST_S,
         "action_delay_s": _delay_range(cfg),

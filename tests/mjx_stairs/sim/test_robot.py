@@ -10,6 +10,7 @@ import pytest
 from mujoco import mjx
 
 from mjx_stairs.sim import robot as rb
+from mjx_stairs.sim import touch
 
 # shared/reference/go2.md, typed in independently of the model.
 REFERENCE_RANGE = {
@@ -158,7 +159,7 @@ def test_the_head_sphere_is_a_trunk_sphere_where_configured():
     qpos = rb.standing_qpos((5.0, 5.0), rb.HEAD[2] - rb.HEAD[1][2] - 0.01)
     d = jax.jit(mjx.forward)(mjx.put_model(model), mjx.make_data(model).replace(
         qpos=jnp.asarray(qpos)))
-    touching = rb.sphere_contacts(d, rb.sphere_contact_rows(model, ids))["trunk"]
+    touching = touch.sphere_contacts(d, touch.sphere_contact_rows(model, ids))["trunk"]
     assert np.asarray(touching).tolist() == [False] * 4 + [True]
     # the ground truth's robot: the same sphere against a box top
     world = box_world.build_model(np.array([[5.3, 5.0, -0.05, 0.2, 0.2, 0.05]]), cfg)
@@ -249,7 +250,7 @@ def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
         d = jax.jit(mjx.forward)(mjx.put_model(m), mjx.make_data(m).replace(
             qpos=jnp.asarray(qpos)))
         touching[calf] = {k: np.asarray(v).tolist()
-                          for k, v in rb.sphere_contacts(d, rb.sphere_contact_rows(
+                          for k, v in touch.sphere_contacts(d, touch.sphere_contact_rows(
                               m, rb.robot_ids(m))).items()}
     assert touching[True]["shin"] == [True, False, False, False]
     assert not any(any(v) for v in touching[False].values()), touching[False]
@@ -270,3 +271,64 @@ def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
             parts = [sw.PARTS[i] for i in sw._parts(world, stairs)]
             assert {parts[world.geom(n).id] for n in geoms.calf_chain_names("RR")} == {"calf"}
             assert parts[world.geom("RR_foot").id] == "foot"
+
+
+def test_thigh_chain_covers_the_thigh_and_touches_a_step_edge_as_a_thigh():
+    """robot.thigh_collision: spheres along each thigh as go2_full.xml's thigh capsule lies,
+    overlapping; a column poking 5 mm into the front-left thigh (held out forward, the calf
+    pointing up, nothing else above the floor there) is a knee (thigh) contact of that leg alone
+    in MJX and touches the chain in the ground truth's box world, where the robot without the
+    chain touches nothing; sim2sim counts the chain's touches as thigh touches."""
+    from mjx_stairs.sim import box_world, geoms
+    from mjx_stairs.tools import sim2sim_world as sw
+
+    cfg = rb.RobotConfig(terrain_contacts="columns", thigh_collision=True)
+    res = 0.025
+    heights = np.zeros((41, 41), np.float32)
+    model = rb.build_mj_model(heights, res, cfg)
+    assert rb.robot_ids(model).thigh_geoms.shape == (4, 9)
+    assert rb.robot_ids(rb.build_mj_model(heights, res)).thigh_geoms.shape == (4, 0)
+    full = mujoco.MjModel.from_xml_path(str(rb.ASSET.parent / "go2_full.xml"))
+    cap = full.geom("FL_thigh_col")
+    ((a, b, r),) = geoms.THIGH_SHAPE  # the one source of both
+    assert cap.size[0] == r and np.allclose(cap.pos, np.add(a, b) / 2, atol=1e-6)
+    assert cap.size[1] == pytest.approx(np.linalg.norm(np.subtract(b, a)) / 2)
+    # every point of the capsule's axis lies >= r - 4.2 mm deep inside a chain or knee sphere
+    axis = np.asarray(a) + np.linspace(0.0, 1.0, 1000)[:, None] * np.subtract(b, a)
+    centres, radii = geoms.thigh_chain_spheres()
+    centres = np.vstack([centres, geoms.THIGH_TO_CALF])
+    radii = np.append(radii, model.geom("FL_knee").size[0])
+    depth = np.sqrt(np.clip(radii**2 - np.sum((axis[:, None] - centres) ** 2, -1), 0, None))
+    assert depth.max(-1).min() >= r - geoms.CALF_EDGE_GAP - 1e-6
+    qpos = rb.standing_qpos((0.5, 0.5), 0.445)
+    qpos[7 + 1:7 + 3] = (-1.5708, -0.9)  # FL thigh forward, its calf up
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    sphere = model.geom("FL_thigh_chain4")
+    centre = data.geom_xpos[sphere.id]
+    ix, iy = np.round(centre[:2] / res).astype(int)
+    heights[iy, ix] = centre[2] - sphere.size[0] + 0.005
+    touching = {}
+    for thigh in (False, True):
+        m = rb.build_mj_model(heights, res, dataclasses.replace(cfg, thigh_collision=thigh))
+        d = jax.jit(mjx.forward)(mjx.put_model(m), mjx.make_data(m).replace(
+            qpos=jnp.asarray(qpos)))
+        touching[thigh] = {k: np.asarray(v).tolist() for k, v in touch.sphere_contacts(
+            d, touch.sphere_contact_rows(m, rb.robot_ids(m))).items()}
+    assert touching[True]["knee"] == [True, False, False, False], touching[True]
+    assert not any(touching[True][g][i] for g in ("foot", "shin", "trunk") for i in range(4))
+    assert not any(any(v) for v in touching[False].values()), touching[False]
+    box = [ix * res, iy * res, heights[iy, ix] / 2, res / 2, res / 2, heights[iy, ix] / 2]
+    chain = set(geoms.chain_names("FL", "thigh"))
+    for thigh in (False, True):
+        world = box_world.build_model(np.array([box]),
+                                      dataclasses.replace(cfg, thigh_collision=thigh))
+        wd = mujoco.MjData(world)
+        wd.qpos[:] = qpos
+        mujoco.mj_forward(world, wd)
+        names = {world.geom(int(g)).name for g in wd.contact.geom[:wd.ncon].ravel()}
+        assert bool(names & chain) == thigh and names <= {"stair0"} | chain, names
+    stairs = np.array([world.geom(g).name == "stair0" for g in range(world.ngeom)])
+    parts = [sw.PARTS[i] for i in sw._parts(world, stairs)]
+    assert {parts[world.geom(n).id] for n in geoms.chain_names("RR", "thigh")} == {"thigh"}

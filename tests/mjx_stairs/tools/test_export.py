@@ -339,6 +339,7 @@ def test_sidecar_v2_fields_a_robot_program_needs(exported, policy):
     assert t["joint_damping_nms_rad"] == [0.1, 0.1] and t["joint_damping_draw"] == "fixed"
     assert t["joint_damping_integration"] == "explicit" and t["head_collision"] is False
     assert t["calf_collision"] is False
+    assert t["thigh_collision"] is False
     assert t["contact_timeconst_s"] == 0.02  # go2.xml's solref (env.robot.contact_timeconst 0)
 
 
