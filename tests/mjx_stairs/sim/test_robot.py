@@ -200,12 +200,44 @@ def test_contact_timeconst_stiffens_both_simulators_contacts():
         rb.RobotConfig(contact_timeconst=0.005)
 
 
+def _column_under(model, qpos, geom: str, heights, res) -> list[float]:
+    """Raise the grid column under sphere `geom` of the robot at `qpos` to 5 mm above the
+    sphere's bottom (in `heights`, in place); the same column as a box (cx, cy, cz, hx, hy, hz)."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    centre = data.geom_xpos[model.geom(geom).id]
+    ix, iy = np.round(centre[:2] / res).astype(int)
+    heights[iy, ix] = centre[2] - model.geom(geom).size[0] + 0.005
+    return [ix * res, iy * res, heights[iy, ix] / 2, res / 2, res / 2, heights[iy, ix] / 2]
+
+
+def _mjx_touching(heights, res, cfg, qpos) -> dict[str, list[bool]]:
+    """{group: [n] bool} which sphere groups of robot `cfg` at `qpos` touch `heights` in MJX."""
+    m = rb.build_mj_model(heights, res, cfg)
+    d = jax.jit(mjx.forward)(mjx.put_model(m), mjx.make_data(m).replace(qpos=jnp.asarray(qpos)))
+    rows = touch.sphere_contact_rows(m, rb.robot_ids(m))
+    return {k: np.asarray(v).tolist() for k, v in touch.sphere_contacts(d, rows).items()}
+
+
+def _box_touch(box, cfg, qpos):
+    """(model, names of the geoms in contact) of robot `cfg` at `qpos` beside the one `box` in
+    the ground truth's box world (MuJoCo itself)."""
+    from mjx_stairs.sim import box_world
+
+    world = box_world.build_model(np.array([box]), cfg)
+    data = mujoco.MjData(world)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(world, data)
+    return world, {world.geom(int(g)).name for g in data.contact.geom[:data.ncon].ravel()}
+
+
 def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
     """robot.calf_collision: spheres along each calf as go2_full.xml shapes it (two capsules
     along the link's bow), overlapping; a column poking 5 mm into the front-left calf's upper
     stretch is a calf contact of that leg alone in MJX (our columns collider) and touches the
     chain in the ground truth's box world, where the robot without the chain touches nothing."""
-    from mjx_stairs.sim import box_world, geoms
+    from mjx_stairs.sim import geoms
     from mjx_stairs.tools import sim2sim_world as sw
 
     cfg = rb.RobotConfig(terrain_contacts="columns", calf_collision=True)
@@ -238,32 +270,15 @@ def test_calf_chain_covers_the_calf_and_touches_a_step_edge_as_a_calf():
     # a column under a chain sphere between the knee and mid-shin spheres, its top 5 mm above
     # the sphere's bottom
     qpos = rb.standing_qpos((0.5, 0.5), 0.445)
-    data = mujoco.MjData(model)
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    centre = data.geom_xpos[model.geom("FL_calf_chain2").id]
-    ix, iy = np.round(centre[:2] / res).astype(int)
-    heights[iy, ix] = centre[2] - model.geom("FL_calf_chain2").size[0] + 0.005
-    touching = {}
-    for calf in (False, True):
-        m = rb.build_mj_model(heights, res, dataclasses.replace(cfg, calf_collision=calf))
-        d = jax.jit(mjx.forward)(mjx.put_model(m), mjx.make_data(m).replace(
-            qpos=jnp.asarray(qpos)))
-        touching[calf] = {k: np.asarray(v).tolist()
-                          for k, v in touch.sphere_contacts(d, touch.sphere_contact_rows(
-                              m, rb.robot_ids(m))).items()}
+    box = _column_under(model, qpos, "FL_calf_chain2", heights, res)
+    touching = {calf: _mjx_touching(heights, res, dataclasses.replace(cfg, calf_collision=calf),
+                                    qpos) for calf in (False, True)}
     assert touching[True]["shin"] == [True, False, False, False]
     assert not any(any(v) for v in touching[False].values()), touching[False]
     assert not any(touching[True][g][i] for g in ("foot", "knee", "trunk") for i in range(4))
     # the same column as a box in the ground truth's world
-    box = [ix * res, iy * res, heights[iy, ix] / 2, res / 2, res / 2, heights[iy, ix] / 2]
     for calf in (False, True):
-        world = box_world.build_model(np.array([box]),
-                                      dataclasses.replace(cfg, calf_collision=calf))
-        wd = mujoco.MjData(world)
-        wd.qpos[:] = qpos
-        mujoco.mj_forward(world, wd)
-        names = {world.geom(int(g)).name for g in wd.contact.geom[:wd.ncon].ravel()}
+        world, names = _box_touch(box, dataclasses.replace(cfg, calf_collision=calf), qpos)
         assert (names & set(geoms.calf_chain_names("FL")) != set()) == calf, names
         assert names <= {"stair0", *geoms.calf_chain_names("FL")}, names
         if calf:  # sim2sim's step-edge counts: the chain's touches are calf touches
@@ -279,7 +294,7 @@ def test_thigh_chain_covers_the_thigh_and_touches_a_step_edge_as_a_thigh():
     pointing up, nothing else above the floor there) is a knee (thigh) contact of that leg alone
     in MJX and touches the chain in the ground truth's box world, where the robot without the
     chain touches nothing; sim2sim counts the chain's touches as thigh touches."""
-    from mjx_stairs.sim import box_world, geoms
+    from mjx_stairs.sim import geoms
     from mjx_stairs.tools import sim2sim_world as sw
 
     cfg = rb.RobotConfig(terrain_contacts="columns", thigh_collision=True)
@@ -302,32 +317,15 @@ def test_thigh_chain_covers_the_thigh_and_touches_a_step_edge_as_a_thigh():
     assert depth.max(-1).min() >= r - geoms.CALF_EDGE_GAP - 1e-6
     qpos = rb.standing_qpos((0.5, 0.5), 0.445)
     qpos[7 + 1:7 + 3] = (-1.5708, -0.9)  # FL thigh forward, its calf up
-    data = mujoco.MjData(model)
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    sphere = model.geom("FL_thigh_chain4")
-    centre = data.geom_xpos[sphere.id]
-    ix, iy = np.round(centre[:2] / res).astype(int)
-    heights[iy, ix] = centre[2] - sphere.size[0] + 0.005
-    touching = {}
-    for thigh in (False, True):
-        m = rb.build_mj_model(heights, res, dataclasses.replace(cfg, thigh_collision=thigh))
-        d = jax.jit(mjx.forward)(mjx.put_model(m), mjx.make_data(m).replace(
-            qpos=jnp.asarray(qpos)))
-        touching[thigh] = {k: np.asarray(v).tolist() for k, v in touch.sphere_contacts(
-            d, touch.sphere_contact_rows(m, rb.robot_ids(m))).items()}
+    box = _column_under(model, qpos, "FL_thigh_chain4", heights, res)
+    touching = {thigh: _mjx_touching(heights, res, dataclasses.replace(
+        cfg, thigh_collision=thigh), qpos) for thigh in (False, True)}
     assert touching[True]["knee"] == [True, False, False, False], touching[True]
     assert not any(touching[True][g][i] for g in ("foot", "shin", "trunk") for i in range(4))
     assert not any(any(v) for v in touching[False].values()), touching[False]
-    box = [ix * res, iy * res, heights[iy, ix] / 2, res / 2, res / 2, heights[iy, ix] / 2]
     chain = set(geoms.chain_names("FL", "thigh"))
     for thigh in (False, True):
-        world = box_world.build_model(np.array([box]),
-                                      dataclasses.replace(cfg, thigh_collision=thigh))
-        wd = mujoco.MjData(world)
-        wd.qpos[:] = qpos
-        mujoco.mj_forward(world, wd)
-        names = {world.geom(int(g)).name for g in wd.contact.geom[:wd.ncon].ravel()}
+        world, names = _box_touch(box, dataclasses.replace(cfg, thigh_collision=thigh), qpos)
         assert bool(names & chain) == thigh and names <= {"stair0"} | chain, names
     stairs = np.array([world.geom(g).name == "stair0" for g in range(world.ngeom)])
     parts = [sw.PARTS[i] for i in sw._parts(world, stairs)]
