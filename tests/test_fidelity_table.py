@@ -56,3 +56,23 @@ def test_the_stiff_table_judges_each_contact_against_its_own_ground_truth(tmp_pa
     assert "| stage2_u | straight extended L5 | 39.5 ±6.8 (200) | 37.0 (-2.5) | " \
            "43.0 ±3.1 (1000) | 50.0 (+7.0) |" in out
     assert "0.02 s: 2.5 points (2 of 2 cells within 3), 0.01 s: 7.0 points (1 of 2" in out
+
+
+def test_every_physics_option_is_a_valid_env_config():
+    """experiments/gpu/fidelity.py's physics options (run.sh's bench-options and stage2-physics
+    train with them) each name real robot keys with valid values: a typo fails here, not on a
+    lent GPU."""
+    from mjx_stairs.env.config import env_config_from
+
+    spec = importlib.util.spec_from_file_location("fidelity", ROOT / "experiments/gpu/fidelity.py")
+    fidelity = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fidelity)
+    for name, overrides in fidelity.OPTIONS.items():
+        robot = env_config_from(None, overrides).robot
+        for item in overrides:  # each robot field is what the option says (after its preset)
+            key, value = item.split("=", 1)
+            if key.startswith("robot.") and key != "robot.physics":
+                got = str(getattr(robot, key.removeprefix("robot."))).lower()
+                assert got == value.lower() or float(got) == float(value), (name, item, got)
+    limbs = env_config_from(None, fidelity.OPTIONS["evaluation_stiff_limbs"]).robot
+    assert limbs.limb_capsules and limbs.thigh_collision and limbs.solver_iterations == 8

@@ -77,6 +77,16 @@ OPTIONS = {  # env overrides of each physics option
                               "robot.calf_collision=true"),
     "nearest_full_calf": ("robot.terrain_contacts=nearest", "robot.shin_collision=true",
                           "robot.ls_iterations=5", "robot.calf_collision=true"),
+    # the calves and thighs as the full robot's capsules, two contacts each (robot.limb_capsules,
+    # sim.capsule; 2026-12-01), against the same limbs as sphere chains (two contacts a sphere)
+    "evaluation_stiff_limbs": ("robot.physics=evaluation", "robot.contact_timeconst=0.01",
+                               "robot.calf_collision=true", "robot.thigh_collision=true",
+                               "robot.limb_capsules=true"),
+    "evaluation_stiff_limb_chains": ("robot.physics=evaluation", "robot.contact_timeconst=0.01",
+                                     "robot.calf_collision=true", "robot.thigh_collision=true"),
+    "nearest_full_limbs": ("robot.terrain_contacts=nearest", "robot.shin_collision=true",
+                           "robot.ls_iterations=5", "robot.calf_collision=true",
+                           "robot.thigh_collision=true", "robot.limb_capsules=true"),
     # issue 22's candidates between "columns" (1 Newton iteration) and the evaluation physics
     # (8): is a few iterations' convergence enough? With today's evaluation physics's sunk rule
     # (nearest face; their speed, run.sh step bench-options, was measured 2026-11-25 with the
