@@ -1,4 +1,4 @@
-"""Collision spheres that a `RobotConfig` adds to assets/go2.xml: the head, calf and thigh chains.
+"""Collision geoms that a `RobotConfig` adds to assets/go2.xml: the head, calf and thigh chains.
 
 go2.xml collides through spheres only (feet, knees, mid-shins, trunk corners), which leaves
 two stretches of each calf bare: between the knee sphere (r 0.025 at the knee) and the mid-shin
@@ -16,6 +16,8 @@ session 32): the shape of the calf's front decides it. The thigh chain does the 
 go2_full.xml's thigh capsule, which go2.xml leaves bare but for the knee sphere at its lower end:
 in MuJoCo itself the full robot without its thighs descended a residential U flight 4.9 points
 less often (docs/results.md 8ak), so the real thighs bear on step edges that training did not see.
+`add_capsules` adds the same limbs as go2_full.xml's capsules instead (`RobotConfig.limb_capsules`,
+collided in MJX by `sim.capsule` with two contacts each where a chain has two a sphere).
 """
 
 from __future__ import annotations
@@ -167,7 +169,3 @@ def chain_ids(model: mujoco.MjModel, legs: tuple[str, ...], link: str = "calf") 
                if min(i) >= 0]
     return np.array(out, np.int32).reshape(len(legs), -1)
 
-
-def calf_chain_ids(model: mujoco.MjModel, legs: tuple[str, ...]) -> np.ndarray:
-    """[len(legs), k] geom ids of each leg's calf chain in `model` (k = 0 without one)."""
-    return chain_ids(model, legs, "calf")

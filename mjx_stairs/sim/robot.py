@@ -203,8 +203,8 @@ class RobotIds:
     knee_geoms: np.ndarray  # [4]
     shin_geoms: np.ndarray  # [4]
     trunk_geoms: np.ndarray  # [4] corners (+ the head with head_collision: [5])
-    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 11 with calf_collision, else 0)
-    thigh_geoms: np.ndarray  # [4, k] each leg's thigh chain (k = 9 with thigh_collision, else 0)
+    calf_geoms: np.ndarray  # [4, k] each leg's calf chain (k = 11; 2 capsules), else k = 0
+    thigh_geoms: np.ndarray  # [4, k] each leg's thigh chain (k = 9; 1 capsule), else k = 0
     qpos_joints: np.ndarray  # [12] qpos addresses of the joints, in JOINT_NAMES order
     qvel_joints: np.ndarray  # [12] qvel addresses of the joints
 
