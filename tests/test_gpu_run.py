@@ -44,6 +44,7 @@ def test_gpu_groups_run_their_steps_pinned_with_their_variables(tmp_path):
     assert "CUDA_VISIBLE_DEVICES=0 SEED=7" in logs[0], logs[0]
     assert "CUDA_VISIBLE_DEVICES=1 SEED=unset" in logs[1], logs[1]
     assert "unknown step no-such-step" in logs[1]
+    assert "gpuN: group" not in logs[1]
     assert "== gpu0: gpus done" in logs[0] and "== gpu1: gpus done" in logs[1]
     assert "== gpu1.log:" in run.stdout  # waited for, and its log shown
 
@@ -225,3 +226,16 @@ def test_sim2sim_policy_runs_mjx_only_when_a_column_is_asked_and_resumes_a_folde
         assert len(mjx_only) == 1 and gpu_call in mjx_only[0], lines
     out = tmp_path / "out" / "sim2sim" / "p_up"
     assert (out / "cells" / "code_x.json").exists() and (out / "mjx_wall_code.json").exists()
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash")
+def test_a_variable_token_outside_a_group_says_where_it_belongs(tmp_path):
+    """KEY=VALUE,step outside a gpuN: group is not a step: run.sh stops before any GPU work and
+    says to put it in a group (a device call lost to this on 2026-12-01)."""
+    env = {"PATH": "/usr/bin:/bin", "SKIP_INSTALL": "1", "OUT": str(tmp_path),
+           "HOME": str(tmp_path)}
+    run = subprocess.run(["bash", str(RUN), "60", "SEED=7,gpus"], env=env, capture_output=True,
+                         text=True, timeout=120, cwd=RUN.parents[2])
+    assert run.returncode == 2
+    assert "unknown step SEED=7,gpus" in run.stdout
+    assert "gpu0:SEED=7,gpus" in run.stdout

@@ -706,7 +706,10 @@ run_step() {
         if [ "$(stat -c %s "$d.tar")" -gt 15728640 ]; then split -b 15M -d "$d.tar" "$d.tar." && rm "$d.tar"; fi
       done
       ls -la "$OUT" ;;
-    *) echo "unknown step $step"; exit 2 ;;
+    *) echo "unknown step $step"  # one argument: VAR=...,step is a group's syntax
+      [[ "$step" == *=* ]] && echo "(KEY=VALUE,step tokens run in a gpuN: group, e.g. gpu0:$step;" \
+        "or export KEY=VALUE before run.sh)"
+      exit 2 ;;
   esac
 }
 
