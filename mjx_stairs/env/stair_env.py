@@ -15,7 +15,7 @@ Where ours differs from the authors' Isaac Lab setup:
   casting (mjx.ray does not see heightfields); for our own terrain it is exact.
 - Everything is computed from qpos/qvel, so a reset needs no extra forward pass.
 - The contact penalties read MJX contacts of our collision spheres: trunk corners stand for
-  base/head, knee spheres (thigh chains) for thighs, mid-shin spheres (calf chains) for calves.
+  base/head, knee spheres (+ thigh chain or capsule) thighs, mid-shin spheres (+ calf's) calves.
 - Regularisers are always on (the authors switch most on once the curriculum's top level is
   reached; a cross-robot gate does not fit a per-robot env).
 """

@@ -46,8 +46,9 @@ def build_model(
     """The Go2 standing among `boxes` [M, 6] (cx, cy, cz, hx, hy, hz), PD as actuators.
 
     Collision spheres are spheres whatever `config.terrain_contacts` says; mid-shin spheres
-    collide when `config.shin_collision`, the head and the calf and thigh chains are there when
-    `config.head_collision`, `config.calf_collision` and `config.thigh_collision` say so.
+    collide when `config.shin_collision`, the head and the calf and thigh chains (capsules with
+    `config.limb_capsules`) are there when `config.head_collision`, `config.calf_collision` and
+    `config.thigh_collision` say so.
     Gains are `config.kp` / `config.kd`, limits the reference torque limits times
     `config.torque_scale`, the joints' passive damping `config.joint_damping` (None: the MJCF's).
     `heightfield` = (heights, resolution) stands the robot on that heightfield instead (MuJoCo's

@@ -102,8 +102,8 @@ def check(model: mujoco.MjModel) -> None:
     """Refuse a model with a terrain-colliding capsule wider than MAX_RADIUS (the collider's
     window of columns would miss some)."""
     for g in range(model.ngeom):
-        capsule = model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
-        wide = capsule and model.geom_size[g, 0] > MAX_RADIUS
+        is_capsule = model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
+        wide = is_capsule and model.geom_size[g, 0] > MAX_RADIUS
         if wide and model.geom_contype[g] | model.geom_conaffinity[g]:
             raise ValueError(f"capsule geom {model.geom(g).name!r}: radius {model.geom_size[g, 0]}"
                              f" > {MAX_RADIUS}, more than sim.capsule's collider covers")

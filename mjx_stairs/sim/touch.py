@@ -20,11 +20,8 @@ def sphere_contact_rows(mj_model: mujoco.MjModel, ids: RobotIds) -> dict[str, np
     """{group: [4, rows per leg] rows of MJX's contact array} for each sphere group (None for
     a group that does not collide); a leg's "shin" rows are its mid-shin sphere's and its calf
     chain's (with calf_collision), its "knee" rows its knee sphere's and its thigh chain's (with
-    thigh_collision), the trunk group's [4 or 5, ncon] one sphere each.
-
-    MJX lays contacts out by collision-function group, each geom pair repeated ncon times; the
-    layout is static, so it is read once here (tests check it against a forward pass).
-    """
+    thigh_collision), the trunk group's [4 or 5, ncon] one sphere each (tests check the layout
+    against a forward pass)."""
     rows: dict[int, list[int]] = {}
     i = 0
     for key, pairs in collision_driver._geom_groups(mj_model).items():
