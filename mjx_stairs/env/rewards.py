@@ -40,6 +40,12 @@ class Quantities(NamedTuple):
     shin_contacts: jnp.ndarray  # [4] bool, each calf (its mid-shin sphere or calf chain)
     first_contact: jnp.ndarray  # [4] bool, a foot touched down this step
     air_time: jnp.ndarray  # [4] seconds the foot was in the air before touching down
+    # For foot_clearance (zeros while its weight is 0): [4] each foot's contact, its sole's
+    # height, the terrain under it and the terrain clearance_ahead ahead of it along the heading
+    foot_contact: jnp.ndarray
+    sole_height: jnp.ndarray
+    ground_under_foot: jnp.ndarray
+    ground_ahead_of_foot: jnp.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +77,10 @@ class RewardConfig:
     lin_vel_z: float = 0.0  # body-frame vertical speed squared (m/s)^2
     ang_vel_xy: float = 0.0  # roll and pitch rates squared, body frame (rad/s)^2
     roll: float = 0.0  # lateral tilt: gravity's body-y component squared, sin^2(roll) upright
+    # A foot in the air that would stub the step nose ahead of it (off in the paper's reward):
+    # metres its sole is below clearance_target above the next tread, summed over swing feet
+    # with a riser (a rise above clearance_step) within clearance_ahead ahead along the heading
+    foot_clearance: float = 0.0
 
     coarse_std: float = 5.0
     fine_std: float = 1.0
@@ -81,6 +91,9 @@ class RewardConfig:
     air_min: float = 0.4  # s
     air_max: float = 1.0  # s
     straight_within: float = 0.8  # centre-line D is the straight distance this close to the goal
+    clearance_target: float = 0.05  # m above the next tread that a swing foot's sole should be
+    clearance_ahead: float = 0.1  # m ahead of the foot (along the heading) it looks for a riser
+    clearance_step: float = 0.03  # m: a rise smaller than this is not a riser
 
 
 STAGE1 = RewardConfig()
@@ -186,6 +199,15 @@ def feet_air_time(q: Quantities, c: RewardConfig) -> jnp.ndarray:
     return jnp.sum(air * q.first_contact)
 
 
+def foot_clearance(q: Quantities, c: RewardConfig) -> jnp.ndarray:
+    """Metres of sole below the next tread + clearance_target, over the swing feet facing a
+    riser: a foot carried low into a step nose (what stubs it) costs, a foot lifted first does
+    not; flat ground and the way down (no rise ahead) cost nothing."""
+    riser = q.ground_ahead_of_foot - q.ground_under_foot > c.clearance_step
+    deficit = jnp.clip(q.ground_ahead_of_foot + c.clearance_target - q.sole_height, 0.0, None)
+    return jnp.sum(jnp.where(riser & ~q.foot_contact, deficit, 0.0))
+
+
 def lin_vel_z(q: Quantities, c: RewardConfig) -> jnp.ndarray:
     return jnp.square(q.lin_vel_body[2])
 
@@ -220,6 +242,7 @@ TERMS: dict[str, Callable[[Quantities, RewardConfig], jnp.ndarray]] = {
         overspeed,
         backward,
         feet_air_time,
+        foot_clearance,
         lin_vel_z,
         ang_vel_xy,
         roll,
@@ -240,6 +263,22 @@ def compute(q: Quantities, config: RewardConfig, dt: float) -> tuple[jnp.ndarray
     }
     total = sum(terms.values()) if terms else jnp.zeros(())
     return total, terms
+
+
+def feet_quantities(height: Callable, feet: jnp.ndarray, radius: jnp.ndarray, yaw: jnp.ndarray,
+                    contact: jnp.ndarray, c: RewardConfig) -> dict[str, jnp.ndarray]:
+    """The Quantities fields foot_clearance reads, from the foot spheres' centres `feet` [4, 3]
+    (world), their radii [4], the base's heading and the feet's contacts [4]; zeros while its
+    weight is 0 (no terrain lookups)."""
+    if c.foot_clearance == 0.0:
+        zero = jnp.zeros(4)
+        return dict(foot_contact=jnp.zeros(4, bool), sole_height=zero, ground_under_foot=zero,
+                    ground_ahead_of_foot=zero)
+    x, y = feet[:, 0], feet[:, 1]
+    ahead = c.clearance_ahead * jnp.stack([jnp.cos(yaw), jnp.sin(yaw)])
+    return dict(foot_contact=contact, sole_height=feet[:, 2] - radius,
+                ground_under_foot=height(x, y), ground_ahead_of_foot=height(x + ahead[0],
+                                                                            y + ahead[1]))
 
 
 def centreline_geometry(

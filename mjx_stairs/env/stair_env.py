@@ -74,8 +74,8 @@ class StairEnv(Env):
         self.tile_origin = self.tiles.origin  # [n, 2] host copy
         self._table = cur.TileTable(np.asarray(atlas.family), int(atlas.cols), len(self.families))
         self.contact_rows = touch.sphere_contact_rows(mj, ids)
+        self._foot_radius = jnp.asarray(mj.geom_size[ids.foot_geoms, 0])
         self.actuate = Actuator(self._mx, ids, config, self.terrain, self.tiles)
-
         self._nominal = jnp.asarray(rb.NOMINAL_JOINT_POS)
         lo, hi = rb.JOINT_RANGE[:, 0], rb.JOINT_RANGE[:, 1]
         mid, r = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -289,6 +289,8 @@ class StairEnv(Env):
             shin_contacts=touching["shin"],
             first_contact=foot & ~info["last_foot_contact"],
             air_time=info["air_time"] + self._dt,
+            **rw.feet_quantities(self.terrain_height, data.geom_xpos[self._ids.foot_geoms],
+                                 self._foot_radius, kin.yaw, foot, c.rewards),
         )
         return q, arc, foot
 
@@ -304,8 +306,7 @@ class StairEnv(Env):
     def _auto_reset(self, data: mjx.Data, info: dict, final_obs: dict, ends: endings.Endings,
                     moved_up: jnp.ndarray, key: jax.Array) -> tuple[mjx.Data, dict, dict]:
         """The curriculum's next level, then a fresh episode where this one ended."""
-        c = self.config
-        level = info["level"]
+        c, level = self.config, info["level"]
         if c.curriculum.enabled:
             k_level, key = jax.random.split(key)
             next_level = cur.next_level(level, moved_up, self.num_levels, k_level, c.curriculum)
@@ -319,8 +320,7 @@ class StairEnv(Env):
         info = {k: (v if k == "rng" else jax.tree_util.tree_map(pick, fresh.info[k], v))
                 for k, v in info.items()}
         obs = jax.tree_util.tree_map(pick, fresh.obs, final_obs)
-        info["final_obs"] = final_obs
-        info["truncation"] = ends.truncated.astype(jnp.float32)
+        info.update(final_obs=final_obs, truncation=ends.truncated.astype(jnp.float32))
         return data, obs, info
 
     def metric_names(self) -> tuple[str, ...]:

@@ -214,6 +214,10 @@ def _quantities(**kw):
         shin_contacts=jnp.zeros(4, bool),
         first_contact=jnp.zeros(4, bool),
         air_time=jnp.zeros(4),
+        foot_contact=jnp.zeros(4, bool),
+        sole_height=jnp.zeros(4),
+        ground_under_foot=jnp.zeros(4),
+        ground_ahead_of_foot=jnp.zeros(4),
     )
     base.update(kw)
     return rw.Quantities(**base)
@@ -291,6 +295,61 @@ def test_base_motion_terms_read_the_bodys_rates_and_lean_not_the_stairs_pitch(en
     q, _, _ = env._quantities(d, base_kinematics(d.qpos, d.qvel), jnp.zeros(12), one.info)
     np.testing.assert_allclose(np.asarray(q.ang_vel_body), [1.0, 2.0, 3.0])
     assert float(rw.roll(q, c)) == pytest.approx(np.sin(lean) ** 2, rel=1e-5)
+
+
+def _step_at(x0: float, rise: float):
+    """A terrain height function with one step of `rise` (m) at x = x0 (jnp, like the env's)."""
+    return lambda x, y: jnp.where(x > x0, rise, 0.0) + 0.0 * y
+
+
+@pytest.mark.parametrize("case", ["stub", "lifted", "standing", "flat", "down", "facing_away"])
+def test_foot_clearance_costs_a_swing_foot_carried_low_into_a_riser_alone(case):
+    """foot_clearance through feet_quantities on a 19.7 cm step at x = 1: the swing foot 5 cm
+    before it with its sole 5 cm up costs the rise + 5 cm target - 5 cm; lifted above the next
+    tread + target, on the ground (in contact), on flat ground, facing a drop or facing away from
+    the step, it costs nothing."""
+    c = dataclasses.replace(rw.STAGE2, foot_clearance=-2.0)
+    rise, yaw, sole, contact = 0.197, 0.0, 0.05, False
+    if case == "lifted":
+        sole = rise + c.clearance_target + 0.01
+    rise = {"flat": 0.0, "down": -0.197}.get(case, rise)
+    yaw = np.pi if case == "facing_away" else yaw
+    contact = case == "standing"
+    radius = jnp.full(4, 0.022)
+    feet = jnp.array([[0.95, 0.1, sole + 0.022]] + [[0.0, 0.0, 0.022]] * 3)  # three feet far back
+    f = rw.feet_quantities(_step_at(1.0, rise), feet, radius, jnp.float32(yaw),
+                           jnp.array([contact, True, True, True]), c)
+    q = _quantities(**f)
+    want = 0.197 + c.clearance_target - 0.05 if case == "stub" else 0.0
+    assert float(rw.foot_clearance(q, c)) == pytest.approx(want, abs=1e-6)
+    _, terms = rw.compute(q, c, 0.02)
+    assert float(terms["foot_clearance"]) == pytest.approx(-2.0 * 0.02 * want, abs=1e-7)
+    assert "foot_clearance" not in rw.active_terms(rw.STAGE2)  # off in the paper's reward
+    off = rw.feet_quantities(_step_at(1.0, rise), feet, radius, jnp.float32(yaw),
+                             jnp.ones(4, bool), rw.STAGE2)
+    assert not np.any(np.asarray(off["foot_contact"])) and float(rw.foot_clearance(
+        _quantities(**off), c)) == 0.0  # no terrain read while unweighted
+
+
+def test_foot_clearance_reads_the_feet_of_a_standing_robot_on_their_ground(env, fns, atlas):
+    """The env's foot_clearance inputs for robots that stood 1 s on the flat tile: each foot
+    touches, its sole (sphere centre - radius) within 5 mm of the terrain under it, which is the
+    atlas's own height there (numpy reference); no riser ahead on flat ground, so no cost."""
+    cfg = dataclasses.replace(env.config,
+                              rewards=dataclasses.replace(env.config.rewards, foot_clearance=-2.0))
+    weighted = StairEnv(atlas, cfg)
+    state = _reset(env, fns, [0] * B)
+    for _ in range(int(1.0 / env.dt)):
+        state = fns["step"](state, jnp.zeros((B, 12)))
+    one = jax.tree.map(lambda x: x[0], state)
+    d = one.pipeline_state
+    q, _, foot = weighted._quantities(d, base_kinematics(d.qpos, d.qvel), jnp.zeros(12), one.info)
+    feet = np.asarray(d.geom_xpos[env.robot.ids.foot_geoms])
+    ref = terrains.sample_heights(atlas.heights, atlas.resolution, feet[:, 0], feet[:, 1])
+    np.testing.assert_allclose(np.asarray(q.ground_under_foot), ref, atol=2e-4)
+    assert np.all(np.asarray(q.foot_contact)) and np.all(np.asarray(foot))
+    np.testing.assert_allclose(np.asarray(q.sole_height), ref, atol=5e-3)
+    assert float(rw.foot_clearance(q, cfg.rewards)) == 0.0
 
 
 # ----------------------------------------------------------------------------- curriculum
