@@ -275,10 +275,9 @@ def feet_quantities(height: Callable, feet: jnp.ndarray, radius: jnp.ndarray, ya
         return dict(foot_contact=jnp.zeros(4, bool), sole_height=zero, ground_under_foot=zero,
                     ground_ahead_of_foot=zero)
     x, y = feet[:, 0], feet[:, 1]
-    ahead = c.clearance_ahead * jnp.stack([jnp.cos(yaw), jnp.sin(yaw)])
+    ax, ay = c.clearance_ahead * jnp.cos(yaw), c.clearance_ahead * jnp.sin(yaw)
     return dict(foot_contact=contact, sole_height=feet[:, 2] - radius,
-                ground_under_foot=height(x, y), ground_ahead_of_foot=height(x + ahead[0],
-                                                                            y + ahead[1]))
+                ground_under_foot=height(x, y), ground_ahead_of_foot=height(x + ax, y + ay))
 
 
 def centreline_geometry(
