@@ -250,23 +250,23 @@ def case_summary(name, rs):
     return s
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def case_arguments(ap: argparse.ArgumentParser, episode_s: float) -> None:
+    """The options of a script that rolls a policy on named suite cases (this one,
+    experiments/reward_terms.py)."""
     ap.add_argument("--checkpoint", required=True)
     ap.add_argument("--suite", default="code")
     ap.add_argument("--case", required=True, help="case names, comma separated")
     ap.add_argument("--robots", type=int, default=8)
-    ap.add_argument("--episode-s", type=float, default=30.0)
+    ap.add_argument("--episode-s", type=float, default=episode_s)
     ap.add_argument("--resolution", type=float, default=0.025)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--env", nargs="*", default=[], help="env overrides KEY=VALUE")
-    ap.add_argument("--out", default=None)
-    ap.add_argument("--riser", type=float, default=0.17,
-                    help="m, for a case whose tile has no spec of its own (an imported mesh)")
-    ap.add_argument("--risers", type=int, default=20, help="the same, risers up to the top")
-    ap.add_argument("--trace", type=int, default=0,
-                    help="print the first N falling robots' last 2 s every 0.1 s")
-    a = ap.parse_args()
+
+
+def case_setup(a: argparse.Namespace):
+    """(cases [(name, tile)], policy, env, state) for case_arguments' parsed options: the
+    evaluation env of `mjx-stairs eval --suite` on those cases, robot k of every case from the
+    same key."""
     wanted = a.case.split(",")
     every = dict(suite_cases(a.suite, a.resolution))
     missing = [n for n in wanted if n not in every]
@@ -277,7 +277,21 @@ def main() -> None:
                     resolution=a.resolution, env_overrides=tuple(a.env))
     policy = load_policy(a.checkpoint)
     env = evaluate.eval_env(policy, case_atlas(cases), spec)
-    state = case_states(env, len(cases), a.robots, a.seed)
+    return cases, policy, env, case_states(env, len(cases), a.robots, a.seed)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    case_arguments(ap, episode_s=30.0)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--riser", type=float, default=0.17,
+                    help="m, for a case whose tile has no spec of its own (an imported mesh)")
+    ap.add_argument("--risers", type=int, default=20, help="the same, risers up to the top")
+    ap.add_argument("--trace", type=int, default=0,
+                    help="print the first N falling robots' last 2 s every 0.1 s")
+    a = ap.parse_args()
+    cases, policy, env, state = case_setup(a)
+    wanted = [name for name, _ in cases]
     t0 = time.time()
     rec = jax.device_get(jax.jit(lambda s: rollout(env, policy, s))(state))
     wall = time.time() - t0

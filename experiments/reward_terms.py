@@ -19,12 +19,8 @@ import json
 
 import jax
 import numpy as np
-from diagnose_episodes import first_episodes  # experiments/, the script's folder
-
-from mjx_stairs.rl.policy import load_policy
-from mjx_stairs.study import evaluate
-from mjx_stairs.study.cases import case_atlas, case_states, suite_cases
-from mjx_stairs.study.specs import EvalSpec
+from diagnose_cases import case_arguments, case_setup  # experiments/, the script's folder
+from diagnose_episodes import first_episodes
 
 
 def per_second(rec: dict, robots: int, dt: float, names: list[str]) -> list[dict]:
@@ -42,25 +38,10 @@ def per_second(rec: dict, robots: int, dt: float, names: list[str]) -> list[dict
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--checkpoint", required=True)
-    ap.add_argument("--suite", default="code")
-    ap.add_argument("--case", required=True, help="case names, comma separated")
-    ap.add_argument("--robots", type=int, default=8)
-    ap.add_argument("--episode-s", type=float, default=10.0)
-    ap.add_argument("--resolution", type=float, default=0.025)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--env", nargs="*", default=[], help="env overrides KEY=VALUE")
+    case_arguments(ap, episode_s=10.0)
     a = ap.parse_args()
-    names = a.case.split(",")
-    every = dict(suite_cases(a.suite, a.resolution))
-    missing = [n for n in names if n not in every]
-    if missing:
-        raise SystemExit(f"unknown cases {missing}; known: {', '.join(every)}")
-    spec = EvalSpec(robots_per_level=a.robots, episode_length_s=a.episode_s, seed=a.seed,
-                    resolution=a.resolution, env_overrides=tuple(a.env))
-    policy = load_policy(a.checkpoint)
-    env = evaluate.eval_env(policy, case_atlas([(n, every[n]) for n in names]), spec)
-    state = case_states(env, len(names), a.robots, a.seed)
+    cases, policy, env, state = case_setup(a)
+    names = [name for name, _ in cases]
     keys = [k for k in state.metrics if k.startswith("reward/")]
     rec = jax.device_get(jax.jit(lambda s: first_episodes(
         env, policy, s, lambda st: {k: st.metrics[k] for k in keys}, lambda st: {}))(state))
