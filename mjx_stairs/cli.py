@@ -14,6 +14,7 @@ from typing import Any
 
 from mjx_stairs.config import ConfigError
 from mjx_stairs.rl.checkpoint import CheckpointError
+from mjx_stairs.study import scorecard
 from mjx_stairs.study.cli_flags import flag_cases, glued_poses, mesh_flags
 from mjx_stairs.study.specs import EvalSpec
 from mjx_stairs.tools import sim2sim_cli
@@ -374,6 +375,7 @@ def _add_tools(sub) -> None:
                          "per s of the robot's action delay; docs/deploy.md)")
     ex.set_defaults(fn=cmd_export)
     sim2sim_cli.add_parser(sub)
+    scorecard.add_parser(sub)
 
 
 def main(argv: list[str] | None = None) -> int:
