@@ -164,7 +164,7 @@ def code_lines(label: str, data: dict, cells: list[Cell]) -> list[str]:
 
 
 def scorecard(evals: list[str | Path], suites: list[str | Path]) -> str:
-    """Long: the markdown scorecard: the paper levels per evaluation seed, then each `code`
+    """The markdown scorecard: the paper levels per evaluation seed, then each `code`
     suite file, then the cells judged with fewer robots than the targets ask for."""
     if not evals and not suites:
         raise ValueError("nothing to score: give --eval and/or --suite")
