@@ -20,10 +20,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mjx_stairs.atomic import write_text
+from terrains.suites import load_suite
 
-FAMILIES = ("straight", "l_shaped", "u_shaped", "spiral")
-LEVELS = (1, 2, 3, 4, 5, 6)
-CODE_BARS = {"commercial": 0.95, "residential": 0.85}
+# The paper's families and test levels as the `paper` suite holds them (terrains/suites.toml)
+_PAPER = load_suite("paper")
+FAMILIES = tuple(dict.fromkeys(c.family for c in _PAPER))
+LEVELS = tuple(sorted({c.level + 1 for c in _PAPER}))
+CODE_BARS = {"commercial": 0.95, "residential": 0.85}  # the targets per code limit
 ROBOTS = 1000  # robots a cell the targets are judged with
 
 
@@ -85,9 +88,9 @@ def paper_cells(paths: list[str | Path]) -> dict[int, dict[tuple, Cell]]:
                 raise ValueError(f"{path}: an eval record without {e}") from e
             if schedule != "test" or fam not in FAMILIES:
                 continue
+            cells = out.setdefault(int(seed), {})
             for level, success in rows:
                 key = (fam, direction, int(level))
-                cells = out.setdefault(int(seed), {})
                 if key in cells:
                     raise ValueError(f"{path}: {fam} {direction} L{level} at seed {seed} "
                                      "given twice")

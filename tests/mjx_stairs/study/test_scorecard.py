@@ -8,7 +8,7 @@ import pytest
 from mjx_stairs import cli
 from mjx_stairs.study import scorecard as sc
 
-FAMILIES = ("straight", "l_shaped", "u_shaped", "spiral")
+FAMILIES = sc.FAMILIES
 
 
 def _eval_file(path, direction, success, seed=0, robots=1000, schedule="test"):
